@@ -1,0 +1,36 @@
+"""Compatibility with the pinned brax (0.14.2) on newer jax.
+
+brax's ``ppo.train`` (and ``pmap.bcast_local_devices``) call
+``jax.device_put_replicated``, which jax removed in 0.10. :func:`install`
+restores it — a copy of the value on each device, stacked along a new leading
+axis and laid out one slice per device, exactly what ``jax.pmap`` consumes — and
+only when jax lacks it. Importing :mod:`mjx_damage` installs it.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def _device_put_replicated(x, devices):
+  devices = list(devices)
+  if not devices:
+    raise ValueError("devices: empty device list")
+  mesh = jax.sharding.Mesh(np.array(devices), ("replica",))
+  sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("replica"))
+
+  def put(a):
+    a = jnp.asarray(a)
+    return jax.device_put(jnp.broadcast_to(a[None], (len(devices),) + a.shape), sharding)
+
+  return jax.tree.map(put, x)
+
+
+def install() -> bool:
+  """Add ``jax.device_put_replicated`` if missing; True when it was added."""
+  if hasattr(jax, "device_put_replicated"):
+    return False
+  jax.device_put_replicated = _device_put_replicated
+  return True

@@ -1,0 +1,234 @@
+"""Damage-aware Brax environment wrapper.
+
+``DamageWrapper(env, ...)`` adds to ``state.info``:
+
+* ``link_health`` f32[L], ``entity_health`` f32[N] (100 = intact),
+* ``cost`` f32[] — total damage (health points, all links, all models) this step,
+* ``damage`` — {"mechanical", "thermal", "fluid"} totals this step, f32[] each,
+* ``task_reward`` f32[] — the wrapped env's reward before shaping,
+* ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7),
+
+and shapes ``reward ← reward − weight·cost``, optionally appends entity health
+/ 100 to the observation and ends the episode when an entity's health reaches 0.
+
+Two modes:
+
+* **Per substep** — the env steps through :func:`mjx_damage.physics.step`
+  (it has a ``damage_binding``, like every task of this project): damage is
+  evaluated at every physics substep inside the env.
+* **Once per env step (fallback)** — any other Brax env whose
+  ``state.pipeline_state`` is an ``mjx.Data``: give ``config`` (and ``model``
+  unless the env has ``mj_model`` or ``sys.mj_model``). Its step hides its
+  substeps, so damage is evaluated once per env step from the final state's
+  contacts, with each link's acceleration taken as the change of its COM
+  velocity over the step divided by ``env.dt``. Short impacts between env steps
+  can be missed or blurred: prefer the per-substep mode where you can.
+
+Episodes are recognised by simulation time (``pipeline_state.time`` returning
+to its reset value), so health is restored to 100 under Brax's own
+``AutoResetWrapper``, which restores only ``pipeline_state`` and ``obs``.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import jax
+import jax.numpy as jnp
+import mujoco
+from brax.envs.base import State, Wrapper
+
+from mjx_damage import health as H
+from mjx_damage import physics
+from mjx_damage.binding import bind, contact_forces, link_velocity
+from mjx_damage.params import DamageParams
+from mjx_damage.signals import LinkSignals
+
+ParamsFn = Callable[[jax.Array, DamageParams], DamageParams]
+
+
+def _zero_episode():
+  z = jnp.zeros((), jnp.float32)
+  return {"completed": z, "cost": z, "length": z, "damaged": z}
+
+
+class DamageWrapper(Wrapper):
+  """Health, cost, damage-penalised reward and termination for a Brax env.
+
+  Args:
+    env: a Brax env (``reset``/``step``; ``state.pipeline_state`` an ``mjx.Data``).
+    config: damage config (dict or YAML path); required unless ``env`` tracks
+      damage itself (has ``damage_binding``).
+    model: the scene's ``mujoco.MjModel`` when ``env`` exposes none.
+    weight: w ≥ 0 in ``reward − w·cost``.
+    terminate_on_destroyed: end the episode when any tracked entity's health is 0.
+    health_in_obs: append entity health / 100 (f32[N]) to the observation.
+    params_fn: ``(rng, default_params) -> params`` drawn at every reset
+      (fragility randomisation); default: the binding's parameters.
+    safe_threshold: entity health above which an episode counts as safe.
+  """
+
+  def __init__(
+      self,
+      env,
+      config=None,
+      *,
+      model: Optional[mujoco.MjModel] = None,
+      weight: float = 0.0,
+      terminate_on_destroyed: bool = False,
+      health_in_obs: bool = False,
+      params_fn: Optional[ParamsFn] = None,
+      safe_threshold: float = 95.0,
+  ):
+    super().__init__(env)
+    for name, v in (("weight", weight), ("safe_threshold", safe_threshold)):
+      if isinstance(v, bool) or not isinstance(v, (int, float)) or not v == v or v < 0:
+        raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
+    if safe_threshold > H.MAX_HEALTH:
+      raise ValueError(f"safe_threshold: must be <= 100, got {safe_threshold!r}")
+    inner = getattr(env, "damage_binding", None)
+    self.per_substep = inner is not None
+    if inner is not None:
+      if config is not None:
+        raise ValueError("config: this env already tracks damage (it has damage_binding); drop config")
+      self.binding = inner
+    else:
+      if config is None:
+        raise ValueError("config: required to wrap an env that does not track damage itself")
+      model = model or getattr(env, "mj_model", None) or getattr(getattr(env, "sys", None), "mj_model", None)
+      if not isinstance(model, mujoco.MjModel):
+        raise ValueError("model: pass the scene's mujoco.MjModel (the env exposes none)")
+      self.binding = bind(model, config)
+    self.weight = float(weight)
+    self.terminate_on_destroyed = bool(terminate_on_destroyed)
+    self.health_in_obs = bool(health_in_obs)
+    self.params_fn = params_fn
+    self.safe_threshold = float(safe_threshold)
+
+  # -- Brax API -------------------------------------------------------------
+  @property
+  def observation_size(self):
+    n = self.env.observation_size
+    return n + self.binding.num_entities if self.health_in_obs else n
+
+  @property
+  def entity_names(self) -> tuple[str, ...]:
+    return self.binding.entity_names
+
+  @property
+  def link_names(self) -> tuple[str, ...]:
+    return self.binding.link_names
+
+  def reset(self, rng: jax.Array) -> State:
+    rng, prng = jax.random.split(rng)
+    state = self.env.reset(rng)
+    ds = state.info.get("damage_state") if self.per_substep else None
+    if ds is None:
+      ds = physics.init_state(self.binding, rng=prng)
+      ds = ds.replace(link_vel=self._mjx_velocity(state))
+    if self.params_fn is not None:
+      ds = ds.replace(params=self.params_fn(prng, self.binding.params))
+    info = dict(state.info)
+    info["damage_state"] = ds
+    info["damage_initial"] = ds
+    info["damage_t0"] = state.pipeline_state.time
+    info.update(self._summaries(ds, jnp.zeros((), jnp.float32)))
+    info["task_reward"] = state.reward
+    info["damage_episode"] = _zero_episode()
+    metrics = dict(state.metrics)
+    metrics.update(self._metrics(info))
+    return state.replace(obs=self._obs(state.obs, info), info=info, metrics=metrics)
+
+  def step(self, state: State, action: jax.Array) -> State:
+    info = dict(state.info)
+    # Brax's AutoResetWrapper restores pipeline_state but not info: a fresh
+    # episode is one whose time is back at its reset value.
+    fresh = state.pipeline_state.time <= info["damage_t0"]
+    info["damage_state"] = jax.tree.map(
+        lambda a, b: jnp.where(fresh, a, b), info["damage_initial"], info["damage_state"]
+    )
+    episode = jax.tree.map(lambda x: jnp.where(fresh, 0.0, x), info["damage_episode"])
+    inner = state.replace(obs=self._strip_obs(state.obs), info=info)
+    if self.per_substep:
+      nstate = self.env.step(inner, action)
+      ds = nstate.info["damage_state"]
+    else:
+      ds = physics.begin_step(info["damage_state"])
+      nstate = self.env.step(inner, action)
+      ds = self._fallback_damage(nstate, ds)
+    info = dict(nstate.info)
+    info["damage_state"] = ds
+    cost = jnp.sum(ds.step_damage.total())
+    info.update(self._summaries(ds, cost))
+    info["task_reward"] = nstate.reward
+    success = nstate.metrics.get("success", jnp.zeros((), jnp.float32))
+    info["damage_episode"] = {
+        "completed": jnp.maximum(episode["completed"], success),
+        "cost": episode["cost"] + cost,
+        "length": episode["length"] + 1.0,
+        "damaged": jnp.maximum(episode["damaged"], (cost > 0).astype(jnp.float32)),
+    }
+    reward = nstate.reward - self.weight * cost
+    done = nstate.done
+    if self.terminate_on_destroyed:
+      destroyed = jnp.any(info["entity_health"] <= 0.0)
+      done = jnp.maximum(done, destroyed.astype(done.dtype))
+    metrics = dict(nstate.metrics)
+    metrics.update(self._metrics(info))
+    return nstate.replace(obs=self._obs(nstate.obs, info), reward=reward, done=done, info=info, metrics=metrics)
+
+  # -- helpers --------------------------------------------------------------
+  def _summaries(self, ds: physics.DamageState, cost):
+    b = self.binding
+    return {
+        "link_health": ds.link_health,
+        "entity_health": H.entity_health(ds.link_health, b.link_entity, b.num_entities),
+        "cost": cost,
+        "damage": {
+            "mechanical": jnp.sum(ds.step_damage.mechanical),
+            "thermal": jnp.sum(ds.step_damage.thermal),
+            "fluid": jnp.sum(ds.step_damage.fluid),
+        },
+    }
+
+  def _metrics(self, info):
+    eh = info["entity_health"]
+    return {
+        "cost": info["cost"],
+        "damage_mechanical": info["damage"]["mechanical"],
+        "damage_thermal": info["damage"]["thermal"],
+        "damage_fluid": info["damage"]["fluid"],
+        "min_entity_health": jnp.min(eh),
+        "mean_entity_health": jnp.mean(eh),
+        "safe": (jnp.min(eh) > self.safe_threshold).astype(jnp.float32),
+    }
+
+  def _obs(self, obs, info):
+    if not self.health_in_obs:
+      return obs
+    return jnp.concatenate([obs, info["entity_health"] / H.MAX_HEALTH], axis=-1)
+
+  def _strip_obs(self, obs):
+    if not self.health_in_obs:
+      return obs
+    return obs[..., : obs.shape[-1] - self.binding.num_entities]
+
+  def _mjx_model(self):
+    return getattr(self.env, "sys", None) or getattr(self.env, "mjx_model")
+
+  def _mjx_velocity(self, state):
+    return link_velocity(self.binding, state.pipeline_state)
+
+  def _fallback_damage(self, nstate: State, ds: physics.DamageState) -> physics.DamageState:
+    d = nstate.pipeline_state
+    dt = self.env.dt
+    vel = link_velocity(self.binding, d)
+    forces, force_link = contact_forces(self.binding, self._mjx_model(), d)
+    sig = LinkSignals(
+        forces=forces,
+        force_link=force_link,
+        link_acc=(vel - ds.link_vel) / dt,
+        temperature=ds.temperature,
+        exposure=ds.exposure,
+    )
+    return physics.apply_signals(ds, sig, dt).replace(link_vel=vel)
