@@ -1,0 +1,510 @@
+"""``mjx-damage bench``: throughput of the damage-aware MJX step, with damage on and off.
+
+Measures environment steps per second (one env step = ``n_substeps`` physics
+steps) of ``jit(fori_loop(vmap(step)))`` on the K-box table scene
+(:mod:`mjx_damage.scenes.bench_table`):
+
+* versus the number of environments, damage on (:func:`mjx_damage.physics.step`)
+  and off (:func:`mjx_damage.physics.step_without_damage`), at K tracked boxes;
+* versus the number of tracked entities K, damage on and off, at a fixed batch;
+* the same scene stepped by the reference-style pipeline
+  (:mod:`mjx_damage.reference`: native MuJoCo, per-entity Python evaluators),
+  native MuJoCo without damage, and multi-threaded ``mujoco.rollout``, in the
+  same run, for the speed-up ratio;
+* physics steps/s of ``tasks.make("place_plate")`` when the task registry has it.
+
+Each measurement records its first-compile time and the process's peak memory
+so far (CPU: ``ru_maxrss``; GPU: ``peak_bytes_in_use`` — both high-water marks).
+Output: a JSON file and a PNG with both curves. ``benchmarks/throughput.py``
+wraps this with the committed settings per device.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import sys
+import time
+from typing import Optional
+
+import numpy as np
+
+CPU_ENVS = (1, 16, 128, 1024, 2048)
+GPU_ENVS = (1, 256, 2048, 8192, 16384)
+ENTITIES = (1, 2, 4, 8, 16, 32)
+CTRL_PERIOD_S = 2.0  # period of the pusher's Lissajous sweep
+
+
+def pusher_ctrl(t, radius: float, xp=np):
+  """Open-loop pusher target (m, f[2]) at time ``t`` (s): a Lissajous figure over the grid."""
+  w = 2 * math.pi / CTRL_PERIOD_S
+  return xp.stack([radius * xp.sin(w * t), 0.8 * radius * xp.sin(2 * w * t + 0.5)])
+
+
+# --- the benchmark env (also a small env with actions for tests) -------------
+
+def _table_env_class():
+  import jax
+  import jax.numpy as jnp
+  from brax.envs.base import State
+  from mujoco import mjx
+
+  from mjx_damage.env import DamageEnv
+  from mjx_damage.scenes import bench_table as S
+
+  class TableEnv(DamageEnv):
+    """K boxes on a table and a pusher; action f32[2] ∈ [−1, 1]² = pusher target / sweep radius.
+
+    Success: box 0 pushed more than 5 cm from where it started. Observation
+    f32[5]: pusher xy, box 0 xyz (m). Reset jitters every box by ±1 cm.
+    """
+
+    def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50):
+      super().__init__(S.table_scene(k), S.table_config(k), n_substeps)
+      self.k = k
+      self.radius = S.sweep_radius(k)
+      self.episode_length = int(episode_length)
+      m = self.mj_model
+      self._box_q = np.array([m.jnt_qposadr[m.joint(f"box{i}").id] for i in range(k)])
+      self._qpos0 = np.array(m.qpos0, np.float32)
+
+    @property
+    def observation_size(self) -> int:
+      return 5
+
+    @property
+    def action_size(self) -> int:
+      return 2
+
+    def initial_qpos(self, rng) -> jax.Array:
+      """f32[nq] reset configuration: boxes on their grid, jittered ±1 cm in x and y."""
+      jit = jax.random.uniform(rng, (self.k, 2), minval=-0.01, maxval=0.01)
+      q = jnp.asarray(self._qpos0)
+      idx = jnp.asarray(self._box_q)
+      return q.at[idx].add(jit[:, 0]).at[idx + 1].add(jit[:, 1])
+
+    def reset(self, rng: jax.Array) -> State:
+      rng, qr = jax.random.split(rng)
+      d = mjx.make_data(self.sys).replace(qpos=self.initial_qpos(qr))
+      d = mjx.forward(self.sys, d)
+      info = {"damage_state": self.init_damage(rng), "box0_start": d.qpos[self._box_q[0] : self._box_q[0] + 2]}
+      z = jnp.zeros(())
+      return State(d, self._obs(d), z, z, {"success": z}, info)
+
+    def step(self, state: State, action: jax.Array) -> State:
+      ctrl = self.radius * jnp.clip(action, -1.0, 1.0)
+      d, ds = self.physics_step(state.pipeline_state, state.info["damage_state"], ctrl)
+      moved = jnp.linalg.norm(d.qpos[self._box_q[0] : self._box_q[0] + 2] - state.info["box0_start"])
+      success = (moved > 0.05).astype(jnp.float32)
+      info = dict(state.info, damage_state=ds)
+      metrics = dict(state.metrics, success=success)
+      return state.replace(pipeline_state=d, obs=self._obs(d), info=info, metrics=metrics)
+
+    def _obs(self, d):
+      b = self._box_q[0]
+      return jnp.concatenate([d.qpos[:2], d.qpos[b : b + 3]])
+
+  return TableEnv
+
+
+def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50):
+  """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene."""
+  return _table_env_class()(k, n_substeps, episode_length)
+
+
+# --- measurement --------------------------------------------------------------
+
+def peak_memory_bytes() -> dict:
+  """High-water marks so far: host RSS (bytes) and, on accelerators, device peak_bytes_in_use."""
+  import jax
+
+  out = {"host_maxrss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
+  dev = jax.devices()[0]
+  if dev.platform != "cpu":
+    stats = dev.memory_stats() or {}
+    out["device_peak_bytes_in_use"] = int(stats.get("peak_bytes_in_use", -1))
+  return out
+
+
+def batched_initial_state(env, envs: int, seed: int = 0):
+  """(mjx.Data, DamageState) with a leading axis of ``envs`` (host-built: no compile per size)."""
+  import jax
+  import jax.numpy as jnp
+  from mujoco import mjx
+
+  from mjx_damage import physics
+
+  rng = np.random.default_rng(seed)
+  q = np.tile(np.asarray(env.mj_model.qpos0, np.float32), (envs, 1))
+  idx = env._box_q
+  q[:, idx] += rng.uniform(-0.01, 0.01, (envs, len(idx)))
+  q[:, idx + 1] += rng.uniform(-0.01, 0.01, (envs, len(idx)))
+  d0 = mjx.make_data(env.sys)
+  ds0 = physics.init_state(env.damage_binding)
+  tile = lambda x: jnp.broadcast_to(x, (envs,) + jnp.shape(x))
+  d = jax.tree.map(tile, d0).replace(qpos=jnp.asarray(q))
+  return d, jax.tree.map(tile, ds0), q
+
+
+def make_runner(env, damage: bool):
+  """``run(d, ds, nsteps) -> (d, ds)``: ``nsteps`` (traced) control steps of the whole batch.
+
+  The pusher follows :func:`pusher_ctrl` of each env's simulation time, inside
+  the compiled loop, so both settings do identical physics work.
+  """
+  import jax
+  import jax.numpy as jnp
+
+  from mjx_damage import physics
+
+  sys_, binding, n, radius = env.sys, env.damage_binding, env.n_substeps, env.radius
+
+  def one(d, ds):
+    d = d.replace(ctrl=pusher_ctrl(d.time, radius, jnp).astype(d.ctrl.dtype))
+    if damage:
+      return physics.step(sys_, binding, d, ds, n)
+    return physics.step_without_damage(sys_, d, n), ds
+
+  batched = jax.vmap(one)
+
+  def run(d, ds, nsteps):
+    return jax.lax.fori_loop(0, nsteps, lambda _, c: batched(*c), (d, ds))
+
+  return jax.jit(run, donate_argnums=(0, 1))
+
+
+def measure(env, envs: int, damage: bool, target_s: float, max_steps: int, seed: int = 0) -> dict:
+  """Compile once, time one step, then time enough steps for about ``target_s`` seconds."""
+  import jax
+  import jax.numpy as jnp
+
+  d, ds, _ = batched_initial_state(env, envs, seed)
+  run = make_runner(env, damage)
+  t0 = time.perf_counter()
+  compiled = run.lower(d, ds, jnp.int32(1)).compile()
+  compile_s = time.perf_counter() - t0
+  t0 = time.perf_counter()
+  d, ds = jax.block_until_ready(compiled(d, ds, jnp.int32(1)))
+  first_s = time.perf_counter() - t0
+  steps = int(min(max_steps, max(2, math.ceil(target_s / max(first_s, 1e-6)))))
+  t0 = time.perf_counter()
+  d, ds = jax.block_until_ready(compiled(d, ds, jnp.int32(steps)))
+  secs = time.perf_counter() - t0
+  out = {
+      "envs": envs,
+      "entities": env.k,
+      "damage": damage,
+      "steps": steps,
+      "seconds": secs,
+      "env_steps_per_s": envs * steps / secs,
+      "physics_steps_per_s": envs * steps * env.n_substeps / secs,
+      "compile_s": compile_s,
+      "first_call_s": first_s,
+  }
+  if damage:
+    out["mean_min_health"] = float(jnp.mean(jnp.min(ds.link_health, axis=-1)))
+  out.update(peak_memory_bytes())
+  return out
+
+
+def measure_task(name: str, envs: int, target_s: float, max_steps: int) -> dict:
+  """Physics steps/s of a registry task's ``step`` (damage on, zero action), vmapped."""
+  import jax
+  import jax.numpy as jnp
+  import tasks
+
+  env = tasks.make(name)
+  n_sub = getattr(env, "n_substeps", None) or getattr(env.unwrapped, "n_substeps", 1)
+  state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), envs))
+  act = jnp.zeros((envs, env.action_size))
+
+  def run(state, nsteps):
+    return jax.lax.fori_loop(0, nsteps, lambda _, s: jax.vmap(env.step)(s, act), state)
+
+  run = jax.jit(run, donate_argnums=(0,))
+  t0 = time.perf_counter()
+  compiled = run.lower(state, jnp.int32(1)).compile()
+  compile_s = time.perf_counter() - t0
+  t0 = time.perf_counter()
+  state = jax.block_until_ready(compiled(state, jnp.int32(1)))
+  first_s = time.perf_counter() - t0
+  steps = int(min(max_steps, max(2, math.ceil(target_s / max(first_s, 1e-6)))))
+  t0 = time.perf_counter()
+  state = jax.block_until_ready(compiled(state, jnp.int32(steps)))
+  secs = time.perf_counter() - t0
+  out = {
+      "task": name,
+      "envs": envs,
+      "n_substeps": int(n_sub),
+      "steps": steps,
+      "seconds": secs,
+      "env_steps_per_s": envs * steps / secs,
+      "physics_steps_per_s": envs * steps * n_sub / secs,
+      "compile_s": compile_s,
+  }
+  out.update(peak_memory_bytes())
+  return out
+
+
+# --- the run ------------------------------------------------------------------
+
+class Budget:
+  """Wall-clock budget: measurements are ordered by importance and skipped once it is spent."""
+
+  def __init__(self, seconds: float):
+    self.t0, self.seconds = time.perf_counter(), seconds
+
+  def left(self) -> float:
+    return self.seconds - (time.perf_counter() - self.t0)
+
+
+def _parse_ints(field: str, text: str) -> list[int]:
+  try:
+    vals = [int(v) for v in text.split(",") if v.strip()]
+  except ValueError:
+    raise ValueError(f"{field}: expected comma-separated integers, got {text!r}") from None
+  if not vals or any(v < 1 for v in vals):
+    raise ValueError(f"{field}: need integers >= 1, got {text!r}")
+  return vals
+
+
+def run_benchmark(args) -> dict:
+  import jax
+
+  from mjx_damage import reference
+
+  budget = Budget(args.budget_s)
+  envs_list = _parse_ints("--envs", args.envs)
+  ents = _parse_ints("--entities", args.entities)
+  k_main = args.k
+  fixed = args.entity_envs
+  result = {
+      "command": "mjx-damage bench " + " ".join(args.argv),
+      "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+      "device": str(jax.devices()[0].device_kind),
+      "platform": jax.devices()[0].platform,
+      "num_devices": jax.device_count(),
+      "host": {"machine": platform.machine(), "cpus": os.cpu_count(), "python": sys.version.split()[0]},
+      "versions": {"jax": jax.__version__, "mujoco": __import__("mujoco").__version__},
+      "scene": "mjx_damage.scenes.bench_table: K free boxes (tracked, 'default' params) on a table plane,"
+      " a sphere pusher on slide joints; boxes collide with table and pusher, never with each other",
+      "n_substeps": args.substeps,
+      "timestep_s": 0.004,
+      "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache and
+                                           jax.config.jax_compilation_cache_dir),
+      "notes": list(args.notes),
+      "vs_envs": [],
+      "vs_entities": [],
+      "skipped": [],
+  }
+  envs_cache = {}
+
+  def env_for(k):
+    if k not in envs_cache:
+      envs_cache[k] = table_env(k, args.substeps)
+    return envs_cache[k]
+
+  done = {}
+
+  def point(k, n, damage, section):
+    key = (k, n, damage)
+    if key not in done:
+      if budget.left() <= 0:
+        result["skipped"].append({"entities": k, "envs": n, "damage": damage, "why": "time budget spent"})
+        return None
+      print(f"  K={k:>2} envs={n:>5} damage={'on ' if damage else 'off'} ...", end="", flush=True)
+      done[key] = measure(env_for(k), n, damage, args.target_s, args.max_steps)
+      r = done[key]
+      print(f" {r['env_steps_per_s']:>12,.0f} env-steps/s  compile {r['compile_s']:.1f} s", flush=True)
+    result[section].append(done[key])
+    return done[key]
+
+  # Order = importance, so a spent budget drops the least important points:
+  # 1. the on/off ratio at the target batch with K tracked boxes; 2. K=1 there;
+  # 3. reference pipeline; 4. task throughput; 5. the rest of both curves.
+  top = max(envs_list)
+  target_n = args.ratio_envs if args.ratio_envs else top
+  first = [(k_main, target_n, d, "vs_envs") for d in (True, False)]
+  first += [(1, fixed, d, "vs_entities") for d in (True, False)]
+  first += [(k_main, fixed, d, "vs_entities") for d in (True, False)]
+  rest = [(k, fixed, d, "vs_entities") for k in ents for d in (True, False)]
+  rest += [(k_main, n, d, "vs_envs") for n in envs_list for d in (True, False)]
+  rest = [r for r in dict.fromkeys(rest) if r not in first]  # unique, in order
+  for item in first:
+    point(*item)
+
+  # reference-style pipeline on the same scene (CPU, single thread, Python evaluators)
+  if budget.left() > 0:
+    ref = {}
+    for k in sorted({1, k_main}):
+      env = env_for(k)
+      _, _, q = batched_initial_state(env, args.ref_envs, seed=1)
+      ctrl = lambda t, r=env.radius: pusher_ctrl(t, r)
+      print(f"  reference K={k} ...", flush=True)
+      ref[k] = {
+          "reference_damage": reference.time_reference(
+              env.mj_model, env.damage_binding, args.substeps, q, ctrl, args.ref_steps, True, args.ref_max_s),
+          "native_no_damage": reference.time_reference(
+              env.mj_model, env.damage_binding, args.substeps, q, ctrl, args.ref_steps, False, args.ref_max_s),
+          "rollout_no_damage": reference.time_rollout(
+              env.mj_model, args.substeps, q, ctrl, args.ref_steps, os.cpu_count() or 1),
+      }
+    result["reference"] = {str(k): v for k, v in ref.items()}
+  else:
+    result["skipped"].append({"reference": True, "why": "time budget spent"})
+
+  if args.task and budget.left() > 0:
+    try:
+      import tasks  # noqa: F401
+
+      if args.task in tasks.names():
+        print(f"  task {args.task} x {args.task_envs} envs ...", flush=True)
+        result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps)
+      else:
+        result["skipped"].append({"task": args.task, "why": "not in tasks.names()"})
+    except (ImportError, AttributeError) as e:
+      result["skipped"].append({"task": args.task, "why": f"task registry unavailable: {e}"})
+
+  for item in rest:
+    point(*item)
+
+  result["summary"] = summarize(result, k_main, target_n, fixed)
+  result["total_s"] = time.perf_counter() - budget.t0
+  return result
+
+
+def _lookup(rows, **kw):
+  for r in rows:
+    if all(r.get(k) == v for k, v in kw.items()):
+      return r
+  return None
+
+
+def summarize(result: dict, k_main: int, target_n: int, fixed: int) -> dict:
+  """Ratios the project reports against its targets (computed from this run's rows only)."""
+  rows = result["vs_envs"] + result["vs_entities"]
+  s = {}
+  on = _lookup(rows, entities=k_main, envs=target_n, damage=True)
+  off = _lookup(rows, entities=k_main, envs=target_n, damage=False)
+  if on and off:
+    s[f"damage_on_off_ratio_K{k_main}_{target_n}envs"] = on["env_steps_per_s"] / off["env_steps_per_s"]
+  one = _lookup(rows, entities=1, envs=fixed, damage=True)
+  many = _lookup(rows, entities=k_main, envs=fixed, damage=True)
+  if one and many:
+    s[f"entities_{k_main}_over_1_throughput_damage_on_{fixed}envs"] = many["env_steps_per_s"] / one["env_steps_per_s"]
+  one_off = _lookup(rows, entities=1, envs=fixed, damage=False)
+  many_off = _lookup(rows, entities=k_main, envs=fixed, damage=False)
+  if one_off and many_off:
+    s[f"entities_{k_main}_over_1_throughput_damage_off_{fixed}envs"] = (
+        many_off["env_steps_per_s"] / one_off["env_steps_per_s"])
+  for k, ref in result.get("reference", {}).items():
+    best = max((r for r in rows if r["entities"] == int(k) and r["damage"]),
+               key=lambda r: r["env_steps_per_s"], default=None)
+    if best:
+      s[f"speedup_over_reference_K{k}"] = {
+          "mjx_env_steps_per_s": best["env_steps_per_s"],
+          "mjx_envs": best["envs"],
+          "reference_env_steps_per_s": ref["reference_damage"]["env_steps_per_s"],
+          "ratio_vs_reference_damage": best["env_steps_per_s"] / ref["reference_damage"]["env_steps_per_s"],
+          "ratio_vs_native_no_damage_1thread": best["env_steps_per_s"] / ref["native_no_damage"]["env_steps_per_s"],
+          "ratio_vs_rollout_no_damage": best["env_steps_per_s"] / ref["rollout_no_damage"]["env_steps_per_s"],
+      }
+  if "task" in result:
+    s["task_physics_steps_per_s"] = result["task"]["physics_steps_per_s"]
+  return s
+
+
+def plot(result: dict, path: str) -> None:
+  """Two panels: env-steps/s vs envs (a line per K × damage), vs tracked entities (on vs off)."""
+  import matplotlib
+
+  matplotlib.use("Agg")
+  import matplotlib.pyplot as plt
+
+  fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
+  settings = sorted({(r["entities"], r["damage"]) for r in result["vs_envs"]})
+  for k, dmg in settings:
+    rows = sorted((r for r in result["vs_envs"] if r["entities"] == k and r["damage"] == dmg), key=lambda r: r["envs"])
+    a.plot([r["envs"] for r in rows], [r["env_steps_per_s"] for r in rows], "o-" if dmg else "s--",
+           label=f"K={k} tracked, damage {'on' if dmg else 'off'}")
+  for k, ref in result.get("reference", {}).items():
+    a.axhline(ref["reference_damage"]["env_steps_per_s"], ls=":", color="gray")
+    a.annotate(f"reference-style K={k}", (1, ref["reference_damage"]["env_steps_per_s"]), fontsize=8, color="gray")
+  a.set(xscale="log", yscale="log", xlabel="parallel environments", ylabel="env steps / s",
+        title=f"{result['device']}: throughput vs batch")
+  a.legend(fontsize=8)
+  for dmg in (True, False):
+    rows = sorted((r for r in result["vs_entities"] if r["damage"] == dmg), key=lambda r: r["entities"])
+    if rows:
+      b.plot([r["entities"] for r in rows], [r["env_steps_per_s"] for r in rows], "o-" if dmg else "s--",
+             label=f"damage {'on' if dmg else 'off'} ({rows[0]['envs']} envs)")
+  b.set(xscale="log", yscale="log", xlabel="tracked entities (damageable free boxes)", ylabel="env steps / s",
+        title="throughput vs tracked entities")
+  b.legend(fontsize=8)
+  fig.tight_layout()
+  fig.savefig(path, dpi=120)
+  plt.close(fig)
+
+
+def build_parser() -> argparse.ArgumentParser:
+  ap = argparse.ArgumentParser(prog="mjx-damage bench", description=__doc__.split("\n\n")[0])
+  ap.add_argument("--envs", default=None, help="comma-separated batch sizes (default: CPU 1..2048, GPU 1..16384)")
+  ap.add_argument("--entities", default=",".join(map(str, ENTITIES)), help="tracked-entity counts K")
+  ap.add_argument("--k", type=int, default=32, help="tracked boxes for the vs-envs curve (default 32)")
+  ap.add_argument("--entity-envs", type=int, default=None, help="batch of the vs-entities curve")
+  ap.add_argument("--ratio-envs", type=int, default=None, help="batch of the on/off ratio (CPU 1024, GPU 8192)")
+  ap.add_argument("--substeps", type=int, default=5, help="physics steps per env step (default 5)")
+  ap.add_argument("--target-s", type=float, default=2.0, help="seconds each timed run aims for")
+  ap.add_argument("--max-steps", type=int, default=200, help="most env steps per timed run")
+  ap.add_argument("--ref-envs", type=int, default=4, help="environments the reference pipeline runs")
+  ap.add_argument("--ref-steps", type=int, default=25, help="env steps per reference environment")
+  ap.add_argument("--ref-max-s", type=float, default=20.0, help="stop the reference after about this long")
+  ap.add_argument("--task", default="place_plate", help="registry task to time ('' to skip)")
+  ap.add_argument("--task-envs", type=int, default=None, help="batch for the task (CPU 256, GPU 32768)")
+  ap.add_argument("--budget-s", type=float, default=540.0, help="stop starting measurements after this long")
+  ap.add_argument("--note", dest="notes", action="append", default=[], help="free text stored in the JSON")
+  ap.add_argument("--out", default="bench.json", help="JSON path (the PNG goes beside it)")
+  return ap
+
+
+def main(argv=None) -> int:
+  argv = list(sys.argv[1:] if argv is None else argv)
+  ap = build_parser()
+  args = ap.parse_args(argv)
+  args.argv = argv
+  import jax
+
+  gpu = jax.devices()[0].platform != "cpu"
+  args.envs = args.envs or ",".join(map(str, GPU_ENVS if gpu else CPU_ENVS))
+  args.entity_envs = args.entity_envs or (8192 if gpu else 1024)
+  args.ratio_envs = args.ratio_envs or (8192 if gpu else 1024)
+  args.task_envs = args.task_envs or (32768 if gpu else 256)
+  try:
+    envs = _parse_ints("--envs", args.envs)
+    _parse_ints("--entities", args.entities)
+    for name in ("k", "entity_envs", "ratio_envs", "substeps", "max_steps", "ref_envs", "ref_steps", "task_envs"):
+      if getattr(args, name) < 1:
+        raise ValueError(f"--{name.replace('_', '-')}: must be >= 1, got {getattr(args, name)}")
+    if args.ratio_envs not in envs:
+      envs.append(args.ratio_envs)
+      args.envs = ",".join(map(str, sorted(envs)))
+  except ValueError as e:
+    ap.error(str(e))
+  print(f"mjx-damage bench on {jax.devices()[0].device_kind} ({jax.device_count()} device(s))", flush=True)
+  result = run_benchmark(args)
+  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+  with open(args.out, "w") as f:
+    json.dump(result, f, indent=1)
+  png = os.path.splitext(args.out)[0] + ".png"
+  plot(result, png)
+  print(json.dumps(result["summary"], indent=1))
+  print(f"wrote {args.out} and {png}")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

@@ -1,0 +1,192 @@
+"""Evaluation sweeps: tasks × policies × seeds × fragility levels → paper-style table.
+
+For each (task, policy) one :class:`train.evaluate.Evaluator` is compiled for a
+batch of ``levels × episodes`` environments; environment ``j`` of level ``i``
+gets fragility ``levels[i]`` in its damage parameters (data, not code), and the
+same episode keys are reused across levels (common random numbers: a level's
+difference is the fragility, not the draw). Every seed reuses the executable;
+the JSON records how many were compiled (1 per task × policy).
+
+CLI::
+
+    mjx-damage sweep --tasks place_plate --policies scripted:safe,scripted:unsafe \
+        --seeds 0,1,2 --fragility 0.5,1,2,4 --episodes 64 --out sweep.json
+
+writes ``sweep.json`` and ``sweep.md`` (like the paper's VLA table: task,
+C %, SC %, average health; one row per task × policy × fragility, mean ± std
+over seeds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from typing import Optional, Sequence
+
+import numpy as np
+
+from train import evaluate as E
+
+
+def _split(field: str, text: str) -> list[str]:
+  vals = [v.strip() for v in text.split(",") if v.strip()]
+  if not vals:
+    raise ValueError(f"{field}: give at least one value")
+  return vals
+
+
+def check_sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int],
+                fragility: Sequence[float], episodes: int, safe_threshold: float = 95.0) -> None:
+  """Validate a sweep before anything is built or compiled (``ValueError`` naming the field)."""
+  from mjx_damage.randomize import check_fragility
+
+  if not tasks:
+    raise ValueError("tasks: give at least one task")
+  for t in tasks:
+    E.check_task(t)
+  if not policies:
+    raise ValueError("policies: give at least one policy")
+  for p in policies:
+    E.parse_policy_spec(p)
+  if not seeds:
+    raise ValueError("seeds: give at least one seed")
+  for i, s in enumerate(seeds):
+    if isinstance(s, bool) or not isinstance(s, int) or s < 0:
+      raise ValueError(f"seeds[{i}]: must be an int >= 0, got {s!r}")
+  check_fragility(list(fragility))
+  E.check_args(episodes, 1.0, safe_threshold)
+
+
+def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], fragility: Sequence[float],
+          episodes: int, safe_threshold: float = 95.0, episode_length: Optional[int] = None,
+          devices=None, log=print) -> dict:
+  """Run the sweep; returns {"rows": aggregated rows, "runs": per-seed rows, "compiles": {...}}."""
+  check_sweep(tasks, policies, seeds, fragility, episodes, safe_threshold)
+  levels = np.asarray(fragility, np.float32)
+  frag = np.repeat(levels, episodes)  # [levels × episodes]
+  runs, rows, compiles = [], [], {}
+  for task in tasks:
+    env = E.make_task(task)
+    T = episode_length or E.episode_length_of(env, task)
+    for spec in policies:
+      ev = E.Evaluator(env, E.make_policy(spec, env), T, devices)
+      t0 = time.perf_counter()
+      per_level = {float(f): [] for f in levels}
+      for seed in seeds:
+        keys = E.episode_keys(seed, episodes)
+        keys = np.tile(np.asarray(keys), (len(levels), 1))  # same episodes at every level
+        per_ep = ev.run(keys, frag)
+        for i, f in enumerate(levels):
+          sl = slice(i * episodes, (i + 1) * episodes)
+          m = E.metrics({k: v[sl] for k, v in per_ep.items()}, env.entity_names, safe_threshold)
+          runs.append({"task": task, "policy": spec, "fragility": float(f), "seed": seed, "metrics": m})
+          per_level[float(f)].append(m)
+      compiles[f"{task}/{spec}"] = ev.num_compiled
+      log(f"{task} / {spec}: {len(seeds)} seed(s) x {len(levels)} levels x {episodes} episodes "
+          f"x {T} steps in {time.perf_counter() - t0:.1f} s, {ev.num_compiled} executable(s)")
+      for f, ms in per_level.items():
+        rows.append(aggregate(task, spec, f, ms))
+  return {"rows": rows, "runs": runs, "compiles": compiles}
+
+
+def aggregate(task: str, policy: str, fragility: float, ms: list[dict]) -> dict:
+  """Mean and std over seeds of one (task, policy, fragility) cell; rates in %."""
+  def stat(get, scale=1.0):
+    v = np.array([get(m) for m in ms], np.float64) * scale
+    return float(v.mean()), float(v.std())
+
+  row = {"task": task, "policy": policy, "fragility": fragility, "seeds": len(ms),
+         "episodes_per_seed": ms[0]["episodes"]}
+  for key, get, scale in (
+      ("C", lambda m: m["completion"], 100.0),
+      ("SC", lambda m: m["safe_completion"], 100.0),
+      ("avg_health", lambda m: m["avg_health"], 1.0),
+      ("zero_damage", lambda m: m["zero_damage_rate"], 100.0),
+      ("cost_mean", lambda m: m["cost_mean"], 1.0),
+  ):
+    row[key], row[key + "_std"] = stat(get, scale)
+  return row
+
+
+def markdown(rows: list[dict], safe_threshold: float) -> str:
+  """The paper-style table (mean ± std over seeds where there are several)."""
+  def cell(r, k, fmt):
+    s = format(r[k], fmt)
+    return s + (" ± " + format(r[k + "_std"], fmt) if r["seeds"] > 1 else "")
+
+  lines = [
+      f"C: task completion rate, SC: safe completion rate (completed and every tracked entity's final "
+      f"health > {safe_threshold:g}), Avg. Health: mean final entity health; fragility f divides "
+      "thresholds and multiplies damage scales.",
+      "",
+      "| Task | Policy | Fragility | C [%] | SC [%] | Avg. Health | Zero damage [%] | Episode cost |",
+      "|---|---|---:|---:|---:|---:|---:|---:|",
+  ]
+  for r in rows:
+    lines.append(f"| {r['task']} | {r['policy']} | {r['fragility']:g} | {cell(r, 'C', '.1f')} | "
+                 f"{cell(r, 'SC', '.1f')} | {cell(r, 'avg_health', '.2f')} | {cell(r, 'zero_damage', '.1f')} | "
+                 f"{cell(r, 'cost_mean', '.2f')} |")
+  return "\n".join(lines) + "\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+  ap = argparse.ArgumentParser(prog="mjx-damage sweep", description="tasks x policies x seeds x fragility sweep")
+  ap.add_argument("--tasks", required=True, help="comma-separated task names")
+  ap.add_argument("--policies", default="scripted:safe,scripted:unsafe", help="comma-separated policy specs")
+  ap.add_argument("--seeds", default="0", help="comma-separated seeds")
+  ap.add_argument("--fragility", default="1", help="comma-separated fragility factors (> 0)")
+  ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
+  ap.add_argument("--episode-length", type=int, default=None)
+  ap.add_argument("--safe-threshold", type=float, default=95.0)
+  ap.add_argument("--out", default="sweep.json", help="JSON path; the markdown table goes beside it (.md)")
+  return ap
+
+
+def main(argv=None) -> int:
+  argv = list(sys.argv[1:] if argv is None else argv)
+  ap = build_parser()
+  args = ap.parse_args(argv)
+  try:
+    tasks = _split("tasks", args.tasks)
+    policies = _split("policies", args.policies)
+    try:
+      seeds = [int(s) for s in _split("seeds", args.seeds)]
+    except ValueError:
+      raise ValueError(f"seeds: expected comma-separated integers, got {args.seeds!r}") from None
+    try:
+      levels = [float(f) for f in _split("fragility", args.fragility)]
+    except ValueError:
+      raise ValueError(f"fragility: expected comma-separated numbers, got {args.fragility!r}") from None
+    check_sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold)
+    if args.episode_length is not None and args.episode_length < 1:
+      raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
+  except ValueError as e:
+    ap.error(str(e))
+  t0 = time.perf_counter()
+  res = sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length)
+  md = markdown(res["rows"], args.safe_threshold)
+  print("\n" + md)
+  out = {
+      "command": "mjx-damage sweep " + " ".join(argv),
+      "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+      "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
+      "episodes": args.episodes, "safe_threshold": args.safe_threshold,
+      "executables_compiled": res["compiles"],
+      "wall_s": time.perf_counter() - t0,
+      "rows": res["rows"], "runs": res["runs"],
+  }
+  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+  with open(args.out, "w") as f:
+    json.dump(out, f, indent=1)
+  md_path = os.path.splitext(args.out)[0] + ".md"
+  with open(md_path, "w") as f:
+    f.write(f"Command: `{out['command']}`\n\n" + md)
+  print(f"wrote {args.out} and {md_path}")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
