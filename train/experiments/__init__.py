@@ -1,0 +1,1 @@
+"""Small environments and experiment helpers for the training package."""
