@@ -28,7 +28,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from train import evaluate as E
+import train.evaluate as E  # a module; train/__init__ also exports a function named evaluate
 
 
 def _split(field: str, text: str) -> list[str]:

@@ -1,0 +1,122 @@
+"""Benchmark scene, reference-style pipeline and report plumbing (no MJX compilation
+except in the slow end-to-end run)."""
+
+import dataclasses
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjx_damage import bench, bind, native
+from mjx_damage import reference as R
+from mjx_damage.scenes import bench_table as S
+from mjx_damage.signals import LinkSignals, evaluate
+
+
+def _collide(m, g1, g2):
+  return bool((m.geom_contype[g1] & m.geom_conaffinity[g2]) | (m.geom_contype[g2] & m.geom_conaffinity[g1]))
+
+
+def test_scene_collides_boxes_only_with_table_and_pusher():
+  m = S.table_scene(5)
+  g = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i): i for i in range(m.ngeom)}
+  boxes = [g[f"box{i}"] for i in range(5)]
+  for i, a in enumerate(boxes):
+    assert _collide(m, a, g["table"]) and _collide(m, a, g["pusher"])
+    assert not any(_collide(m, a, b) for b in boxes[i + 1:])
+  assert not _collide(m, g["pusher"], g["table"])
+  binding = bind(m, S.table_config(5))
+  assert binding.num_entities == binding.num_links == 5
+  with pytest.raises(ValueError, match="^k:"):
+    S.table_scene_xml(0)
+
+
+@pytest.fixture(scope="module")
+def pushed_state():
+  """Native K=3 scene after the pusher has swept into the boxes (contacts with forces)."""
+  m = S.table_scene(3)
+  binding = bind(m, S.table_config(3))
+  d = mujoco.MjData(m)
+  best, best_n = None, -1
+  for _ in range(300):
+    d.ctrl[:] = bench.pusher_ctrl(d.time, S.sweep_radius(3))
+    mujoco.mj_step(m, d)
+    mujoco.mj_forward(m, d)
+    n = sum(1 for i in range(d.ncon) if "pusher" in (m.geom(d.contact[i].geom1).name, m.geom(d.contact[i].geom2).name))
+    if n > best_n:
+      best, best_n = (d.qpos.copy(), d.qvel.copy(), d.time, d.ctrl.copy(), d.act.copy()), n
+  qpos, qvel, t, ctrl, _ = best
+  d.qpos[:], d.qvel[:], d.time, d.ctrl[:] = qpos, qvel, t, ctrl
+  mujoco.mj_forward(m, d)
+  assert best_n > 0, "the pusher never touched a box"
+  return m, binding, d
+
+
+def test_reference_evaluators_match_library_formulas(pushed_state):
+  m, binding, d = pushed_state
+  pipe = R.ReferencePipeline(m, binding, 1)
+  mujoco.mj_forward(m, d)
+  mujoco.mj_rnePostConstraint(m, d)
+  # acceleration via mj_objectAcceleration (+ gravity) = the library's kinematic acceleration
+  acc6 = np.zeros(6)
+  lib_acc = native.link_acceleration(binding, d)
+  for li, body in enumerate(binding.link_body):
+    mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_BODY, int(body), acc6, 0)
+    np.testing.assert_allclose(acc6[3:] + m.opt.gravity, lib_acc[li], rtol=1e-4, atol=1e-3)
+  # for fragile parameters every contact counts, so the comparison is not trivially 0 = 0
+  fragile = binding.params.with_fragility(50.0)
+  pipe = R.ReferencePipeline(m, dataclasses.replace(binding, params=fragile), 1)
+  ref = np.concatenate([ev.mechanical(m, d) for ev in pipe.evaluators])
+  forces, links = native.contact_forces(binding, m, d)
+  sig = LinkSignals(forces, links, lib_acc, np.full(3, 22.0, np.float32), np.zeros(3, np.float32))
+  lib = np.asarray(evaluate(sig, fragile).rate.mechanical)
+  assert ref.max() > 0
+  np.testing.assert_allclose(ref, lib, rtol=2e-3, atol=1e-3)
+
+
+def test_reference_timing_and_rollout_run(pushed_state):
+  m, binding, _ = pushed_state
+  q = np.tile(m.qpos0, (2, 1))
+  ctrl = lambda t: bench.pusher_ctrl(t, S.sweep_radius(3))
+  with_dmg = R.time_reference(m, binding, 2, q, ctrl, steps=5, damage=True)
+  without = R.time_reference(m, binding, 2, q, ctrl, steps=5, damage=False)
+  roll = R.time_rollout(m, 2, q, ctrl, steps=5, nthread=2)
+  assert with_dmg["env_steps"] == without["env_steps"] == roll["env_steps"] == 10
+  assert 0 <= with_dmg["mean_final_min_health"] <= 100
+  assert with_dmg["env_steps_per_s"] > 0 and roll["physics_steps_per_s"] > 0
+
+
+def test_summary_and_plot(tmp_path):
+  rows = [
+      {"envs": n, "entities": k, "damage": dmg, "env_steps_per_s": float(n * (2 if dmg else 2.1) / k)}
+      for n in (1, 8) for k in (1, 4) for dmg in (True, False)
+  ]
+  result = {"device": "cpu", "vs_envs": [r for r in rows if r["entities"] == 4],
+            "vs_entities": [r for r in rows if r["envs"] == 8],
+            "reference": {"4": {"reference_damage": {"env_steps_per_s": 1.0},
+                                "native_no_damage": {"env_steps_per_s": 4.0},
+                                "rollout_no_damage": {"env_steps_per_s": 8.0}}}}
+  s = bench.summarize(result, 4, 8, 8)
+  assert s["damage_on_off_ratio_K4_8envs"] == pytest.approx(2 / 2.1)
+  assert s["entities_4_over_1_throughput_damage_on_8envs"] == pytest.approx(0.25)
+  assert s["speedup_over_reference_K4"]["ratio_vs_reference_damage"] == pytest.approx(4.0)
+  bench.plot(result, str(tmp_path / "p.png"))
+  assert (tmp_path / "p.png").stat().st_size > 1000
+
+
+def test_bench_cli_rejects_bad_sizes(capsys):
+  with pytest.raises(SystemExit):
+    bench.main(["--envs", "0,4"])
+  assert "--envs:" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bench_end_to_end(tmp_path):
+  out = tmp_path / "b.json"
+  assert bench.main(["--envs", "2", "--entities", "1,2", "--k", "2", "--entity-envs", "2", "--ratio-envs", "2",
+                     "--target-s", "0.2", "--max-steps", "3", "--ref-envs", "1", "--ref-steps", "2",
+                     "--task", "", "--out", str(out)]) == 0
+  res = json.loads(out.read_text())
+  assert res["summary"]["damage_on_off_ratio_K2_2envs"] > 0
+  assert (tmp_path / "b.png").exists()
