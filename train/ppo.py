@@ -222,14 +222,26 @@ def _find_damage_wrapper(env) -> Optional[DamageWrapper]:
 
 
 def resolve_task(task, task_kwargs: Optional[dict] = None) -> tuple[Env, str]:
-  """``task`` (a registered name or an env) → (damage-wrapped single env, name).
+  """``task`` → (damage-wrapped single env, name).
+
+  ``task`` is a registered task name (``tasks.make(name, **task_kwargs)``), an
+  env class path ``"package.module:Class"`` (constructed with ``task_kwargs``)
+  or a Brax env instance.
 
   The env must expose ``info["task_reward"]``/``info["cost"]``: anything that
   already contains a :class:`DamageWrapper` is used as is (the trainer shapes
   the reward from those fields, so the wrapper's own weight does not matter);
   a :class:`mjx_damage.DamageEnv` is wrapped at weight 0.
   """
-  if isinstance(task, str):
+  if isinstance(task, str) and ":" in task:  # "package.module:EnvClass", e.g. train.experiments.pusher:PusherEnv
+    import importlib
+    module, _, cls = task.partition(":")
+    try:
+      env = getattr(importlib.import_module(module), cls)(**(task_kwargs or {}))
+    except (ImportError, AttributeError) as e:
+      raise ValueError(f"task: cannot import env class {task!r} ({e})") from e
+    name = task
+  elif isinstance(task, str):
     try:
       import tasks as task_registry
     except ImportError as e:  # the registry is a sibling package of this repo
@@ -251,6 +263,12 @@ def resolve_task(task, task_kwargs: Optional[dict] = None) -> tuple[Env, str]:
   return env, name
 
 
+def task_episode_length(env, default: int = 200) -> int:
+  """The episode length a task declares (``Task.episode_length``), else ``default``."""
+  n = getattr(getattr(env, "unwrapped", env), "episode_length", None)
+  return int(n) if isinstance(n, (int, np.integer)) and n > 0 else default
+
+
 def _safe_threshold(env) -> float:
   w = _find_damage_wrapper(env)
   return float(w.safe_threshold) if w is not None else 95.0
@@ -269,6 +287,21 @@ class EpisodeAcc:
 
 
 @flax.struct.dataclass
+class Shaping:
+  """Reward-shaping and multiplier settings, f32[] each.
+
+  Kept as traced values in the state rather than Python constants so that runs
+  differing only in w / ĉ / lr_λ share one compiled iteration (tests, sweeps).
+  """
+
+  damage_weight: jax.Array  # w
+  lagrangian: jax.Array  # 1.0: λ is updated; 0.0: λ stays at its initial value 0
+  budget: jax.Array  # ĉ (unused without a budget)
+  lagrange_lr: jax.Array
+  lagrange_max: jax.Array
+
+
+@flax.struct.dataclass
 class TrainState:
   params: ppo_losses.PPONetworkParams
   opt_state: Any
@@ -278,6 +311,7 @@ class TrainState:
   lagrange: jax.Array  # f32[], λ ≥ 0 (stays at 0 without a budget)
   cost_estimate: jax.Array  # f32[], last measured mean episode cost J_c
   has_cost_estimate: jax.Array  # f32[], 1.0 once any training episode has ended
+  shaping: Shaping
   rng: jax.Array  # u32[2]
   iteration: jax.Array  # i32[]
 
@@ -352,6 +386,13 @@ class Trainer:
         lagrange=jnp.asarray(self.cfg.lagrange_init if self.cfg.lagrangian else 0.0, jnp.float32),
         cost_estimate=jnp.zeros((), jnp.float32),
         has_cost_estimate=jnp.zeros((), jnp.float32),
+        shaping=Shaping(
+            damage_weight=jnp.asarray(self.cfg.damage_weight, jnp.float32),
+            lagrangian=jnp.asarray(float(self.cfg.lagrangian), jnp.float32),
+            budget=jnp.asarray(self.cfg.budget or 0.0, jnp.float32),
+            lagrange_lr=jnp.asarray(self.cfg.lagrange_lr, jnp.float32),
+            lagrange_max=jnp.asarray(self.cfg.lagrange_max, jnp.float32),
+        ),
         rng=key,
         iteration=jnp.zeros((), jnp.int32),
     )
@@ -450,20 +491,18 @@ class Trainer:
 
   def train_iteration(self, ts: TrainState):
     """One PPO(-Lagrangian) iteration. Pure: ``(TrainState) -> (TrainState, metrics f32[] dict)``."""
-    cfg = self.cfg
+    sh = ts.shaping
     ts, data, ended = self.collect(ts)
     # Reward shaping with the multiplier the rollout was collected under.
     cost = data.extras["state_extras"]["cost"]  # f32[R·E, T]
-    data = data._replace(reward=data.reward - (cfg.damage_weight + ts.lagrange) * cost)
+    data = data._replace(reward=data.reward - (sh.damage_weight + ts.lagrange) * cost)
     # Mean cost of episodes that ended in this rollout; keep the last estimate if none did.
     n = ended["episodes"]
     any_ended = n > 0
     cost_estimate = jnp.where(any_ended, ended["cost"] / jnp.maximum(n, 1.0), ts.cost_estimate)
     has_estimate = jnp.maximum(ts.has_cost_estimate, any_ended.astype(jnp.float32))
-    lam = ts.lagrange
-    if cfg.lagrangian:
-      lam_new = lagrange_update(lam, cost_estimate, cfg.budget, cfg.lagrange_lr, cfg.lagrange_max)
-      lam = jnp.where(has_estimate > 0, lam_new, lam)
+    lam_new = lagrange_update(ts.lagrange, cost_estimate, sh.budget, sh.lagrange_lr, sh.lagrange_max)
+    lam = jnp.where((sh.lagrangian > 0) & (has_estimate > 0), lam_new, ts.lagrange)
     ts, loss_metrics = self.update(ts, data)
     ts = ts.replace(lagrange=lam, cost_estimate=cost_estimate, has_cost_estimate=has_estimate,
                     iteration=ts.iteration + 1)
@@ -539,6 +578,18 @@ def rollout_episodes(eval_env, safe_threshold, episode_length, policy_apply, pol
   s["safe_completion"] = s["completion"] * (s["min_health"] > safe_threshold)
   s["zero_damage"] = (s["cost"] <= 0).astype(jnp.float32)
   return s
+
+
+def make_eval_fn(eval_env, safe_threshold, episode_length, policy_apply, num_episodes):
+  """Jitted ``evaluate_episodes(policy_params, key) -> per-episode arrays`` (see rollout_episodes).
+
+  Built the same way for training-time evaluation and for :func:`evaluate`, so
+  both compile to the same program and share the persistent compilation cache.
+  """
+  def evaluate_episodes(policy_params, key):
+    return rollout_episodes(eval_env, safe_threshold, episode_length, policy_apply, policy_params, key, num_episodes)
+
+  return jax.jit(evaluate_episodes)
 
 
 def summarize_episodes(per_episode: dict) -> dict:
@@ -650,7 +701,7 @@ def train(
     num_minibatches: int = 8,
     num_updates_per_batch: int = 4,
     batch_size: Optional[int] = None,
-    episode_length: int = 200,
+    episode_length: Optional[int] = None,
     normalize_observations: bool = True,
     lagrange_lr: float = 0.05,
     lagrange_init: float = 0.0,
@@ -688,7 +739,8 @@ def train(
   """
   t_start = time.perf_counter()
   cfg = PPOConfig(
-      num_envs=num_envs, num_timesteps=num_timesteps, episode_length=episode_length,
+      num_envs=num_envs, num_timesteps=num_timesteps,
+      episode_length=1 if episode_length is None else episode_length,  # None: the task's, below
       unroll_length=unroll_length, num_minibatches=num_minibatches,
       num_updates_per_batch=num_updates_per_batch, batch_size=batch_size,
       learning_rate=learning_rate, clipping_epsilon=clipping_epsilon, discounting=discounting,
@@ -706,6 +758,8 @@ def train(
   if resume and out_dir is None:
     raise ValueError("resume: needs out_dir (where the checkpoint is)")
   env, task_name = resolve_task(task, task_kwargs)
+  if episode_length is None:
+    cfg = dataclasses.replace(cfg, episode_length=task_episode_length(env))
   trainer = Trainer(env, cfg)
 
   ckpt_path = None
@@ -744,7 +798,7 @@ def train(
   # Donating the state lets XLA update the env batch in place (GPU memory).
   iteration_fn = jax.jit(trainer.train_iteration, donate_argnums=0)
   eval_apply = _policy_apply(trainer.make_policy, deterministic=True)
-  eval_fn = jax.jit(functools.partial(trainer.evaluate, eval_apply), static_argnums=2)
+  eval_fn = make_eval_fn(trainer.eval_env, trainer.safe_threshold, cfg.episode_length, eval_apply, cfg.num_eval_envs)
   eval_key = jax.random.PRNGKey(cfg.seed + 1)
 
   n_iter = cfg.num_iterations
@@ -790,7 +844,7 @@ def train(
 
     if last or (eval_int and iteration % eval_int == 0):
       t0 = time.perf_counter()
-      per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, iteration), cfg.num_eval_envs)
+      per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, iteration))
       ev = summarize_episodes(per_ep)
       timings["eval"] += time.perf_counter() - t0
       n = window.get("episodes", 0.0)
@@ -815,7 +869,7 @@ def train(
     bar.close()
 
   if not final_eval and start_iteration >= n_iter:  # resumed a finished run: evaluate once
-    per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, start_iteration), cfg.num_eval_envs)
+    per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, start_iteration))
     final_eval = summarize_episodes(per_ep)
   if profile:
     timings.update(profile_iteration(trainer, ts))
@@ -901,25 +955,37 @@ def load_policy(path: str, env=None, deterministic: bool = True):
   params = jax.device_put(ckpt.restore(file, template, "policy"))
   make_policy = ppo_networks.make_inference_fn(network)
 
+  apply = _policy_apply(make_policy, deterministic)
+
   def policy(state, rng):
-    return make_policy(params, deterministic=deterministic)(state.obs, rng)[0]
+    return apply(params, state, rng)
 
   policy.meta = meta
   policy.params = params
+  policy.apply = apply  # apply(params, state, rng): the same policy with explicit weights
   return policy
 
 
-def evaluate(task, policy, *, num_episodes: int = 1024, episode_length: int = 200, seed: int = 0,
+def evaluate(task, policy, *, num_episodes: int = 1024, episode_length: Optional[int] = None, seed: int = 0,
              task_kwargs: Optional[dict] = None) -> dict:
   """Mean completion, safe completion, avg env health, episode cost, … over ``num_episodes``.
 
   ``policy(state, rng) -> action`` acts for one env (e.g. from :func:`load_policy`).
   """
   for name, v in (("num_episodes", num_episodes), ("episode_length", episode_length)):
+    if v is None and name == "episode_length":
+      continue
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
       raise ValueError(f"{name}: must be a positive integer, got {v!r}")
   env, _ = resolve_task(task, task_kwargs)
+  episode_length = episode_length or task_episode_length(env)
   eval_env = brax_training.VmapWrapper(brax_training.EpisodeWrapper(env, episode_length, action_repeat=1))
-  apply = lambda _, state, rng: policy(state, rng)  # noqa: E731
-  run = jax.jit(lambda key: rollout_episodes(eval_env, _safe_threshold(env), episode_length, apply, (), key, num_episodes))
-  return summarize_episodes(run(jax.random.PRNGKey(seed)))
+  # A loaded policy passes its weights as an argument (policy.apply/.params)
+  # instead of closing over them: weights are not baked into the compiled
+  # program as constants, and runs with equal shapes reuse one compilation.
+  apply = getattr(policy, "apply", None)
+  params = getattr(policy, "params", ()) if apply is not None else ()
+  if apply is None:
+    apply = lambda _, state, rng: policy(state, rng)  # noqa: E731
+  run = make_eval_fn(eval_env, _safe_threshold(env), episode_length, apply, num_episodes)
+  return summarize_episodes(run(params, jax.random.PRNGKey(seed)))
