@@ -207,6 +207,8 @@ def measure(env, envs: int, damage: bool, target_s: float, max_steps: int, seed:
   }
   if damage:
     out["mean_min_health"] = float(jnp.mean(jnp.min(ds.link_health, axis=-1)))
+  # 1-min load average: on a shared machine other processes' load lowers the numbers
+  out["loadavg_1min"] = os.getloadavg()[0]
   out.update(peak_memory_bytes())
   return out
 
@@ -418,6 +420,38 @@ def summarize(result: dict, k_main: int, target_n: int, fixed: int) -> dict:
   return s
 
 
+def report_md(result: dict) -> str:
+  """Markdown report of a run: tables of every point, the summary, and what the numbers mean."""
+  lines = [f"# Throughput: {result['device']} ({result['platform']}, {result['num_devices']} device(s))", "",
+           f"Command: `{result['command']}`  ", f"Date: {result['date']}; total {result.get('total_s', 0):.0f} s", ""]
+  lines += [f"- note: {n}" for n in result.get("notes", [])]
+  lines += ["", f"One env step = {result['n_substeps']} physics steps of {result['timestep_s'] * 1e3:g} ms. "
+            "Scene: " + result["scene"] + ".", ""]
+  for section, title in (("vs_envs", "Versus environments"), ("vs_entities", "Versus tracked entities")):
+    lines += [f"## {title}", "", "| K tracked | envs | damage | env steps/s | physics steps/s | compile s |"
+              " peak host RSS GB | load avg |", "|---:|---:|---|---:|---:|---:|---:|---:|"]
+    for r in sorted(result[section], key=lambda r: (r["entities"], r["envs"], not r["damage"])):
+      lines.append(f"| {r['entities']} | {r['envs']} | {'on' if r['damage'] else 'off'} | {r['env_steps_per_s']:,.0f} |"
+                   f" {r['physics_steps_per_s']:,.0f} | {r['compile_s']:.1f} | {r['host_maxrss_bytes'] / 2**30:.2f} |"
+                   f" {r.get('loadavg_1min', float('nan')):.1f} |")
+    lines.append("")
+  if "reference" in result:
+    lines += ["## Reference-style and native MuJoCo (same scene, same control)", "",
+              "| K | pipeline | envs run | env steps/s | physics steps/s |", "|---:|---|---:|---:|---:|"]
+    for k, ref in result["reference"].items():
+      for name, r in ref.items():
+        lines.append(f"| {k} | {name} | {r['envs']} | {r['env_steps_per_s']:,.1f} | {r['physics_steps_per_s']:,.0f} |")
+    lines.append("")
+  if "task" in result:
+    t = result["task"]
+    lines += [f"Task `{t['task']}` ({t['envs']} envs, {t['n_substeps']} substeps): "
+              f"{t['physics_steps_per_s']:,.0f} physics steps/s, {t['env_steps_per_s']:,.0f} env steps/s.", ""]
+  lines += ["## Summary", "", "```json", json.dumps(result["summary"], indent=1), "```", ""]
+  if result.get("skipped"):
+    lines += ["Skipped: " + "; ".join(json.dumps(s) for s in result["skipped"]), ""]
+  return "\n".join(lines)
+
+
 def plot(result: dict, path: str) -> None:
   """Two panels: env-steps/s vs envs (a line per K × damage), vs tracked entities (on vs off)."""
   import matplotlib
@@ -501,6 +535,8 @@ def main(argv=None) -> int:
     json.dump(result, f, indent=1)
   png = os.path.splitext(args.out)[0] + ".png"
   plot(result, png)
+  with open(os.path.splitext(args.out)[0] + ".md", "w") as f:
+    f.write(report_md(result))
   print(json.dumps(result["summary"], indent=1))
   print(f"wrote {args.out} and {png}")
   return 0

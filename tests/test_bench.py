@@ -89,18 +89,23 @@ def test_reference_timing_and_rollout_run(pushed_state):
 
 def test_summary_and_plot(tmp_path):
   rows = [
-      {"envs": n, "entities": k, "damage": dmg, "env_steps_per_s": float(n * (2 if dmg else 2.1) / k)}
+      {"envs": n, "entities": k, "damage": dmg, "env_steps_per_s": float(n * (2 if dmg else 2.1) / k),
+       "physics_steps_per_s": 1.0, "compile_s": 1.0, "host_maxrss_bytes": 2**30}
       for n in (1, 8) for k in (1, 4) for dmg in (True, False)
   ]
-  result = {"device": "cpu", "vs_envs": [r for r in rows if r["entities"] == 4],
+  result = {"device": "cpu", "platform": "cpu", "num_devices": 1, "command": "x", "date": "d", "n_substeps": 5,
+            "timestep_s": 0.004, "scene": "s", "vs_envs": [r for r in rows if r["entities"] == 4],
             "vs_entities": [r for r in rows if r["envs"] == 8],
-            "reference": {"4": {"reference_damage": {"env_steps_per_s": 1.0},
-                                "native_no_damage": {"env_steps_per_s": 4.0},
-                                "rollout_no_damage": {"env_steps_per_s": 8.0}}}}
+            "reference": {"4": {"reference_damage": {"env_steps_per_s": 1.0, "envs": 1, "physics_steps_per_s": 5.0},
+                                "native_no_damage": {"env_steps_per_s": 4.0, "envs": 1, "physics_steps_per_s": 20.0},
+                                "rollout_no_damage": {"env_steps_per_s": 8.0, "envs": 1, "physics_steps_per_s": 40.0}}}}
   s = bench.summarize(result, 4, 8, 8)
   assert s["damage_on_off_ratio_K4_8envs"] == pytest.approx(2 / 2.1)
   assert s["entities_4_over_1_throughput_damage_on_8envs"] == pytest.approx(0.25)
   assert s["speedup_over_reference_K4"]["ratio_vs_reference_damage"] == pytest.approx(4.0)
+  result["summary"] = s
+  md = bench.report_md(result)
+  assert "| 4 | 8 | on | 4 |" in md and "ratio_vs_reference_damage" in md
   bench.plot(result, str(tmp_path / "p.png"))
   assert (tmp_path / "p.png").stat().st_size > 1000
 

@@ -1,0 +1,43 @@
+"""Committed evaluation sweep: ``python benchmarks/sweep.py --device cpu|gpu``.
+
+Runs ``mjx-damage sweep`` (:mod:`train.sweep`) over every registered task with
+the scripted safe/unsafe policies, several seeds and fragility levels, and
+writes ``benchmarks/results/sweep_<device>.json`` and ``.md``. The CPU setting
+is small (few episodes) to fit the 2-core machine; the GPU one is the
+paper-style table. Extra arguments pass through (later ones win).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+SETTINGS = {
+    "cpu": ["--seeds", "0,1", "--fragility", "0.5,1,2,4", "--episodes", "8"],
+    "gpu": ["--seeds", "0,1,2", "--fragility", "0.25,0.5,1,2,4,8", "--episodes", "256"],
+}
+
+
+def main(argv=None) -> int:
+  ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+  ap.add_argument("--device", choices=sorted(SETTINGS), required=True)
+  ap.add_argument("--tasks", default=None, help="comma-separated tasks (default: every registered task)")
+  args, extra = ap.parse_known_args(argv)
+  if args.device == "cpu":
+    os.environ.setdefault("JAX_PLATFORMS", "cpu")
+  import tasks
+
+  task_list = args.tasks or ",".join(tasks.names())
+  import train.sweep as sweep
+
+  out = os.path.join(HERE, "results", f"sweep_{args.device}.json")
+  return sweep.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"]
+                    + SETTINGS[args.device] + ["--out", out] + extra)
+
+
+if __name__ == "__main__":
+  sys.exit(main())
