@@ -1,22 +1,379 @@
 """Liquid particles (MuJoCo has none): pure JAX state advanced each substep.
 
-Seam used by :mod:`mjx_damage.physics`: ``build`` (None when no liquid is
-configured), ``init`` and ``advance``. Without liquid nothing is computed and
-every link's exposure stays 0.
+Config (top-level key ``liquid``)::
+
+    liquid:
+      particles: 128                # P, fixed per environment (never created or destroyed)
+      radius: 0.008                 # m, particle radius
+      spawn:                        # a box filled bottom-up on a lattice of spacing 2·radius
+        center: [0, 0, 0.5]         # world frame, m ...
+        size: [0.03, 0.03, 0.05]    # half-sizes, m
+        # ... or relative to a body at the model's reset pose:
+        # body: glass, offset: [0, 0, 0.02], size: [...]
+      damping: 0.5                  # 1/s, linear drag on particle velocity
+      friction: 0.1                 # in [0, 1], tangential velocity removed per substep in contact
+      contact_distance: 0.008       # m, surface gap within which a particle wets a link (default: radius)
+      pair_stiffness: 0.25          # in [0, 1], particle–particle repulsion (0 = off: no O(P²) work)
+      max_speed: 4.0                # m/s, speed clamp (also the tunnelling guard, see below)
+      iterations: 2                 # geom projection passes per substep
+      exclude: [flame_geom]         # geoms the liquid passes through (besides non-colliding ones)
+
+Model (position-based dynamics, per physics substep dt, one environment)::
+
+    v ← (v + g·dt) / (1 + damping·dt)
+    p* = p + v·dt
+    p* += pair repulsion (pairs closer than 2r pushed apart, capped at r/4 per substep)
+    repeat `iterations` times: for every collidable geom with φ(p*) < r: p* += (r − φ)·n
+    v ← (p* − p)/dt;  in contact: tangential v relative to the geom's surface velocity × (1 − friction),
+                      approaching normal velocity removed;  ‖v‖ ≤ max_speed
+    p ← p*
+
+φ and n are the signed distance and outward normal of each geom in its own
+frame (:mod:`mjx_damage.geometry`), with poses from ``d.geom_xpos/xmat`` of this
+substep, so a moving wall pushes particles along (their velocity becomes the
+wall's). Collidable geoms: plane, sphere, capsule, cylinder and box geoms with
+non-zero contype or conaffinity, minus ``exclude``. One-way coupled: particles
+never push bodies. No tunnelling while max_speed·dt < radius + the thinnest
+wall's half-thickness (a particle's centre never crosses a wall's mid-plane
+in one substep).
+
+Exposure of tracked link l = number of particles whose surface gap φ − r to
+any of l's collidable geoms is below ``contact_distance`` → ``ds.exposure``.
+
+Seam used by :mod:`mjx_damage.physics`: :func:`build` (None when no liquid is
+configured: nothing computed, every exposure stays 0), :func:`init`,
+:func:`advance`; tasks that move the container at reset use :func:`spawn`.
 """
 
 from __future__ import annotations
 
+import math
+from typing import Mapping
 
-def build(model, binding, raw):
-  if raw.get("liquid") is not None:
-    raise ValueError("liquid: particles are not available in this version")
-  return None
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from flax import struct
+
+from mjx_damage import geometry as G
+
+MAX_PARTICLES = 4096
+DEFAULTS = {
+    "radius": 0.008,
+    "damping": 0.5,
+    "friction": 0.1,
+    "pair_stiffness": 0.25,
+    "max_speed": 4.0,
+    "iterations": 2,
+}
+_KEYS = ("particles", "radius", "spawn", "damping", "friction", "contact_distance", "pair_stiffness",
+         "max_speed", "iterations", "exclude")
+_SPAWN_KEYS = ("center", "size", "body", "offset")
+_JITTER = 0.05  # × radius: breaks the lattice's symmetry so piles settle naturally
+
+
+@struct.dataclass
+class LiquidModel:
+  """Static liquid model of one scene (closed over by the compiled step)."""
+
+  radius: float = struct.field(pytree_node=False)
+  damping: float = struct.field(pytree_node=False)
+  friction: float = struct.field(pytree_node=False)
+  contact_distance: float = struct.field(pytree_node=False)
+  pair_stiffness: float = struct.field(pytree_node=False)
+  max_speed: float = struct.field(pytree_node=False)
+  iterations: int = struct.field(pytree_node=False)
+  spawn_body: int = struct.field(pytree_node=False)  # body id, or −1: world frame
+  lattice: np.ndarray = struct.field(pytree_node=False)  # f32[P, 3] spawn points in the spawn frame, m
+  spawn_pos: np.ndarray = struct.field(pytree_node=False)  # f32[3] spawn frame origin at reset pose
+  spawn_mat: np.ndarray = struct.field(pytree_node=False)  # f32[3, 3] spawn frame axes at reset pose
+  groups: tuple = struct.field(pytree_node=False)  # geometry.group_by_type of collidable geoms
+  column_geom: np.ndarray = struct.field(pytree_node=False)  # i32[G] geom id of each sdf column
+  column_link: np.ndarray = struct.field(pytree_node=False)  # i32[G] tracked link of each column or −1
+  column_body: np.ndarray = struct.field(pytree_node=False)  # i32[G] body of each column
+  column_root: np.ndarray = struct.field(pytree_node=False)  # i32[G] root body of each column
+
+  @property
+  def num_particles(self) -> int:
+    return self.lattice.shape[0]
+
+
+@struct.dataclass
+class LiquidState:
+  """Particles of one environment.
+
+  pos: f32[P, 3] world frame, m
+  vel: f32[P, 3] world frame, m/s
+  """
+
+  pos: jax.Array
+  vel: jax.Array
+
+
+def _fail(field: str, msg: str):
+  raise ValueError(f"{field}: {msg}")
+
+
+def _number(field: str, v, lo=None, hi=None, positive=False) -> float:
+  if isinstance(v, bool) or not isinstance(v, (int, float)):
+    _fail(field, f"expected a number, got {type(v).__name__} {v!r}")
+  v = float(v)
+  if not math.isfinite(v):
+    _fail(field, f"must be finite, got {v!r}")
+  if positive and v <= 0:
+    _fail(field, f"must be > 0, got {v!r}")
+  if lo is not None and v < lo:
+    _fail(field, f"must be >= {lo}, got {v!r}")
+  if hi is not None and v > hi:
+    _fail(field, f"must be <= {hi}, got {v!r}")
+  return v
+
+
+def _int(field: str, v, lo: int, hi: int) -> int:
+  if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+    _fail(field, f"expected an integer, got {type(v).__name__} {v!r}")
+  if not lo <= v <= hi:
+    _fail(field, f"must be in [{lo}, {hi}], got {v!r}")
+  return int(v)
+
+
+def _vec3(field: str, v, nonneg=False) -> np.ndarray:
+  if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)) or len(v) != 3:
+    _fail(field, f"expected a list of 3 numbers, got {v!r}")
+  return np.array([_number(f"{field}[{i}]", x, lo=0.0 if nonneg else None) for i, x in enumerate(v)], np.float64)
+
+
+def _lattice(n: int, size: np.ndarray, spacing: float, field: str) -> np.ndarray:
+  """n points on a cubic lattice inside the box of half-sizes ``size``, lowest layers first."""
+  counts = np.floor(2 * size / spacing + 1e-9).astype(int) + 1
+  if np.prod(counts) < n:
+    _fail(field, f"a box of half-sizes {size.tolist()} holds only {int(np.prod(counts))} particles at spacing "
+          f"2·radius = {spacing} m; need {n}: enlarge it or reduce particles/radius")
+  axes = [(np.arange(c) - (c - 1) / 2.0) * spacing for c in counts]
+  grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+  grid = grid[np.lexsort((grid[:, 0], grid[:, 1], grid[:, 2]))]  # z-major: fill from the bottom
+  return grid[:n].astype(np.float32)
+
+
+def build(model: mujoco.MjModel, binding, raw: Mapping):
+  """Validate the ``liquid`` config against ``model``; None when there is none.
+
+  Raises:
+    ValueError: naming the field (bad type, out-of-range value, unknown body
+      or geom, a spawn box too small for the particles).
+  """
+  cfg = raw.get("liquid")
+  if cfg is None:
+    return None
+  if not isinstance(cfg, Mapping):
+    _fail("liquid", f"expected a mapping, got {type(cfg).__name__} {cfg!r}")
+  for k in cfg:
+    if k not in _KEYS:
+      _fail(f"liquid.{k}", f"unknown key; allowed: {', '.join(_KEYS)}")
+  if "particles" not in cfg:
+    _fail("liquid.particles", "required (number of particles per environment)")
+  n = _int("liquid.particles", cfg["particles"], 1, MAX_PARTICLES)
+  radius = _number("liquid.radius", cfg.get("radius", DEFAULTS["radius"]), positive=True)
+  damping = _number("liquid.damping", cfg.get("damping", DEFAULTS["damping"]), lo=0.0)
+  friction = _number("liquid.friction", cfg.get("friction", DEFAULTS["friction"]), lo=0.0, hi=1.0)
+  contact = _number("liquid.contact_distance", cfg.get("contact_distance", radius), lo=0.0)
+  stiff = _number("liquid.pair_stiffness", cfg.get("pair_stiffness", DEFAULTS["pair_stiffness"]), lo=0.0, hi=1.0)
+  vmax = _number("liquid.max_speed", cfg.get("max_speed", DEFAULTS["max_speed"]), positive=True)
+  iters = _int("liquid.iterations", cfg.get("iterations", DEFAULTS["iterations"]), 1, 8)
+
+  spawn = cfg.get("spawn")
+  if not isinstance(spawn, Mapping):
+    _fail("liquid.spawn", f"required: a mapping with center/size or body/offset/size, got {spawn!r}")
+  for k in spawn:
+    if k not in _SPAWN_KEYS:
+      _fail(f"liquid.spawn.{k}", f"unknown key; allowed: {', '.join(_SPAWN_KEYS)}")
+  if "size" not in spawn:
+    _fail("liquid.spawn.size", "required: half-sizes [hx, hy, hz] of the spawn box, m")
+  size = _vec3("liquid.spawn.size", spawn["size"], nonneg=True)
+  if ("body" in spawn) == ("center" in spawn):
+    _fail("liquid.spawn", "give exactly one of center (world frame) or body (+ offset)")
+  data = mujoco.MjData(model)
+  mujoco.mj_kinematics(model, data)  # reset pose (qpos0) for body-relative spawns
+  if "body" in spawn:
+    bname = spawn["body"]
+    bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, bname) if isinstance(bname, str) else -1
+    if bid < 0:
+      _fail("liquid.spawn.body", f"unknown body {bname!r} in the model")
+    if "offset" in spawn:
+      offset = _vec3("liquid.spawn.offset", spawn["offset"])
+    else:
+      offset = np.zeros(3)
+    spawn_pos = data.xpos[bid].copy()
+    spawn_mat = data.xmat[bid].reshape(3, 3).copy()
+    lattice = _lattice(n, size, 2 * radius, "liquid.spawn.size") + offset.astype(np.float32)
+  else:
+    if "offset" in spawn:
+      _fail("liquid.spawn.offset", "only with spawn.body")
+    bid = -1
+    spawn_pos = _vec3("liquid.spawn.center", spawn["center"])
+    spawn_mat = np.eye(3)
+    lattice = _lattice(n, size, 2 * radius, "liquid.spawn.size")
+
+  exclude = cfg.get("exclude", [])
+  if isinstance(exclude, (str, bytes)) or not isinstance(exclude, (list, tuple)):
+    _fail("liquid.exclude", f"expected a list of geom names, got {exclude!r}")
+  excluded = set()
+  for i, gname in enumerate(exclude):
+    gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, gname) if isinstance(gname, str) else -1
+    if gid < 0:
+      _fail(f"liquid.exclude[{i}]", f"unknown geom {gname!r} in the model")
+    excluded.add(gid)
+  gtype = np.asarray(model.geom_type)
+  solid = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
+  ids = [g for g in range(model.ngeom) if solid[g] and g not in excluded and int(gtype[g]) in G.SUPPORTED]
+  groups = G.group_by_type(np.array(ids, np.int32), gtype)
+  order = np.concatenate([i for _, i in groups]).astype(np.int32) if groups else np.zeros(0, np.int32)
+  body = model.geom_bodyid[order].astype(np.int32)
+  return LiquidModel(
+      radius=radius,
+      damping=damping,
+      friction=friction,
+      contact_distance=contact,
+      pair_stiffness=stiff,
+      max_speed=vmax,
+      iterations=iters,
+      spawn_body=int(bid),
+      lattice=lattice,
+      spawn_pos=spawn_pos.astype(np.float32),
+      spawn_mat=spawn_mat.astype(np.float32),
+      groups=groups,
+      column_geom=order,
+      column_link=np.asarray(binding.geom_link)[order].astype(np.int32),
+      column_body=body,
+      column_root=model.body_rootid[body].astype(np.int32),
+  )
+
+
+def _spawn_points(lm: LiquidModel, rng, pos, mat) -> LiquidState:
+  jitter = jax.random.uniform(rng, lm.lattice.shape, jnp.float32, -_JITTER, _JITTER) * lm.radius
+  local = jnp.asarray(lm.lattice) + jitter
+  world = jnp.asarray(pos) + local @ jnp.asarray(mat).T
+  return LiquidState(pos=world, vel=jnp.zeros_like(world))
 
 
 def init(binding, rng):
-  return None
+  """Particles at rest in the spawn box (body spawns: the body's reset pose), or None."""
+  lm = binding.liquid
+  if lm is None:
+    return None
+  return _spawn_points(lm, rng, lm.spawn_pos, lm.spawn_mat)
+
+
+def spawn(binding, rng, d) -> LiquidState:
+  """Particles at rest in the spawn box placed at ``d``'s pose of the spawn body.
+
+  For tasks that move the container at reset: call after kinematics
+  (``mjx.forward``/``mjx.kinematics``) and put the result in ``ds.liquid``.
+  Jittable; ``d`` is one environment's mjx.Data.
+  """
+  lm = binding.liquid
+  if lm is None:
+    _fail("liquid", "no liquid configured")
+  if lm.spawn_body < 0:
+    return _spawn_points(lm, rng, lm.spawn_pos, lm.spawn_mat)
+  return _spawn_points(lm, rng, d.xpos[lm.spawn_body], d.xmat[lm.spawn_body].reshape(3, 3))
+
+
+def _pair_push(lm: LiquidModel, p: jax.Array) -> jax.Array:
+  """Jacobi position correction pushing overlapping particles apart, f32[P, 3] m.
+
+  Capped at r/4 per particle per substep so a dense pile can never shove a
+  particle through a thin wall in one step.
+  """
+  diff = p[:, None, :] - p[None, :, :]  # [P, P, 3]
+  d2 = jnp.sum(diff * diff, axis=-1)
+  two_r = 2.0 * lm.radius
+  close = (d2 < two_r * two_r) & ~jnp.eye(p.shape[0], dtype=bool)
+  dist = jnp.sqrt(jnp.where(close, d2, 1.0))
+  overlap = jnp.where(close, two_r - dist, 0.0)
+  push = 0.5 * lm.pair_stiffness * jnp.sum((overlap / jnp.maximum(dist, 1e-6))[..., None] * diff, axis=1)
+  n = jnp.linalg.norm(push, axis=-1, keepdims=True)
+  cap = 0.25 * lm.radius
+  return push * jnp.minimum(1.0, cap / jnp.maximum(n, 1e-12))
+
+
+def _pair_damp(lm: LiquidModel, p: jax.Array, v: jax.Array) -> jax.Array:
+  """Velocity change removing relative normal motion of touching pairs, f32[P, 3] m/s.
+
+  Position pushes turned into velocity (v = Δp/dt) would bounce a settling
+  pile upward; damping the pairs' relative normal velocity (a dashpot, averaged
+  over each particle's neighbours so the Jacobi update never overshoots) only
+  removes energy, which is what lets a glass of liquid come to rest.
+  """
+  diff = p[:, None, :] - p[None, :, :]
+  d2 = jnp.sum(diff * diff, axis=-1)
+  reach = 2.2 * lm.radius  # touching, with a 10 % skin so resting neighbours count
+  near = (d2 < reach * reach) & ~jnp.eye(p.shape[0], dtype=bool)
+  nrm = diff / jnp.sqrt(jnp.where(near, d2, 1.0))[..., None]
+  vn = jnp.sum((v[:, None, :] - v[None, :, :]) * nrm, axis=-1)  # [P, P], > 0 separating
+  count = jnp.maximum(jnp.sum(near, axis=1, keepdims=True), 1).astype(v.dtype)
+  return -0.5 * jnp.sum(jnp.where(near, vn, 0.0)[..., None] * nrm, axis=1) / count
+
+
+def _surface_velocity(lm: LiquidModel, d, p: jax.Array) -> jax.Array:
+  """f32[P, G, 3] velocity of each collidable geom's material at each particle, m/s."""
+  cvel = d.cvel[lm.column_body]  # [G, 6] (angular, linear at the root subtree COM)
+  origin = d.subtree_com[lm.column_root]  # [G, 3]
+  w, v0 = cvel[:, :3], cvel[:, 3:]
+  return v0[None] + jnp.cross(w[None], p[:, None, :] - origin[None])
 
 
 def advance(m, binding, d, ds, dt):
-  return ds
+  """One substep of every particle of one environment; writes ``ds.liquid`` and ``ds.exposure``.
+
+  Reads geom poses and velocities of ``d`` after ``mjx.forward``. No-op without liquid.
+  """
+  lm = binding.liquid
+  if lm is None:
+    return ds
+  st = ds.liquid
+  r = lm.radius
+  p0 = st.pos
+  g = jnp.asarray(m.opt.gravity, jnp.float32)
+  v = (st.vel + g * dt) / (1.0 + lm.damping * dt)
+  p = p0 + v * dt
+  if lm.pair_stiffness > 0 and lm.num_particles > 1:
+    p = p + _pair_push(lm, p)
+  ncol = lm.column_geom.size
+  if ncol:
+    for _ in range(lm.iterations):  # static: a few projection passes
+      phi, n, _ = G.points_to_geoms(lm.groups, d, m, p)
+      pen = jnp.maximum(r - phi, 0.0)  # [P, G] depth of the particle's sphere in each geom
+      p = p + jnp.sum(pen[..., None] * n, axis=1)
+    phi = phi + pen  # after the last push (exact for the geom pushed along its own normal)
+  v = (p - p0) / dt
+  if lm.pair_stiffness > 0 and lm.num_particles > 1:
+    v = v + _pair_damp(lm, p, v)
+  if ncol:
+    # friction and no approach against the closest geom, in that geom's moving frame
+    j = jnp.argmin(phi, axis=1)  # [P]
+    gap = jnp.take_along_axis(phi, j[:, None], 1)[:, 0] - r
+    nj = jnp.take_along_axis(n, j[:, None, None], 1)[:, 0]  # [P, 3]
+    vg = jnp.take_along_axis(_surface_velocity(lm, d, p), j[:, None, None], 1)[:, 0]
+    rel = v - vg
+    vn = jnp.sum(rel * nj, axis=-1, keepdims=True)
+    vt = rel - vn * nj
+    in_contact = (gap < 0.25 * r)[:, None]
+    rel_c = jnp.maximum(vn, 0.0) * nj + (1.0 - lm.friction) * vt
+    v = jnp.where(in_contact, vg + rel_c, v)
+    wet = (phi - r) < lm.contact_distance  # [P, G]
+    link = jnp.asarray(lm.column_link)
+    L = binding.num_links
+    # a particle touching several geoms of one link counts once
+    per_link = jnp.zeros((p.shape[0], L + 1), bool).at[:, jnp.where(link >= 0, link, L)].max(wet)
+    exposure = jnp.sum(per_link[:, :L], axis=0).astype(jnp.float32)
+  else:
+    exposure = jnp.zeros_like(ds.exposure)
+  speed = jnp.linalg.norm(v, axis=-1, keepdims=True)
+  v = v * jnp.minimum(1.0, lm.max_speed / jnp.maximum(speed, 1e-12))
+  ok = jnp.all(jnp.isfinite(p), axis=-1, keepdims=True) & jnp.all(jnp.isfinite(v), axis=-1, keepdims=True)
+  # never let a non-finite value in (it would spread to every exposure): keep the last position
+  p = jnp.where(ok, p, p0)
+  v = jnp.where(ok, v, 0.0)
+  return ds.replace(liquid=LiquidState(pos=p, vel=v), exposure=exposure)
