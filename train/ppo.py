@@ -369,6 +369,22 @@ class Trainer:
 
   # -- init -----------------------------------------------------------------
   def init(self, seed) -> TrainState:
+    """Fresh state. Jit :meth:`init_state` (no config constants in the program, so runs
+    that differ in w / ĉ share its compilation) and set the shaping outside."""
+    return self.with_shaping(self.init_state(seed))
+
+  def with_shaping(self, ts: TrainState) -> TrainState:
+    cfg = self.cfg
+    f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    return ts.replace(
+        lagrange=f32(cfg.lagrange_init if cfg.lagrangian else 0.0),
+        shaping=Shaping(damage_weight=f32(cfg.damage_weight), lagrangian=f32(float(cfg.lagrangian)),
+                        budget=f32(cfg.budget or 0.0), lagrange_lr=f32(cfg.lagrange_lr),
+                        lagrange_max=f32(cfg.lagrange_max)),
+    )
+
+  def init_state(self, seed) -> TrainState:
+    """Networks, optimizer, normaliser, reset envs; λ = 0 and all shaping values 0."""
     key = jax.random.PRNGKey(seed)
     key, k_policy, k_value, k_env = jax.random.split(key, 4)
     params = ppo_losses.PPONetworkParams(
@@ -383,16 +399,10 @@ class Trainer:
         normalizer=running_statistics.init_state(jnp.zeros((self.obs_size,), jnp.float32)),
         env_state=env_state,
         episode=EpisodeAcc(zeros, zeros, zeros),
-        lagrange=jnp.asarray(self.cfg.lagrange_init if self.cfg.lagrangian else 0.0, jnp.float32),
+        lagrange=jnp.zeros((), jnp.float32),
         cost_estimate=jnp.zeros((), jnp.float32),
         has_cost_estimate=jnp.zeros((), jnp.float32),
-        shaping=Shaping(
-            damage_weight=jnp.asarray(self.cfg.damage_weight, jnp.float32),
-            lagrangian=jnp.asarray(float(self.cfg.lagrangian), jnp.float32),
-            budget=jnp.asarray(self.cfg.budget or 0.0, jnp.float32),
-            lagrange_lr=jnp.asarray(self.cfg.lagrange_lr, jnp.float32),
-            lagrange_max=jnp.asarray(self.cfg.lagrange_max, jnp.float32),
-        ),
+        shaping=Shaping(*(jnp.zeros((), jnp.float32) for _ in range(5))),
         rng=key,
         iteration=jnp.zeros((), jnp.int32),
     )
@@ -788,7 +798,7 @@ def train(
     # Rows logged after the checkpoint were produced by the interrupted tail: redo them.
     rows = [r for r in _read_rows(out_dir) if r["iteration"] <= start_iteration]
   else:
-    ts = jax.jit(trainer.init)(cfg.seed)
+    ts = trainer.with_shaping(jax.jit(trainer.init_state)(cfg.seed))
     start_iteration = 0
   if out_dir is not None:
     with open(os.path.join(out_dir, "config.json"), "w") as f:
