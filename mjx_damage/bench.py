@@ -63,8 +63,8 @@ def _table_env_class():
     f32[5]: pusher xy, box 0 xyz (m). Reset jitters every box by ±1 cm.
     """
 
-    def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50):
-      super().__init__(S.table_scene(k), S.table_config(k), n_substeps)
+    def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG"):
+      super().__init__(S.table_scene(k, solver=solver), S.table_config(k), n_substeps)
       self.k = k
       self.radius = S.sweep_radius(k)
       self.episode_length = int(episode_length)
@@ -111,9 +111,9 @@ def _table_env_class():
   return TableEnv
 
 
-def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50):
+def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG"):
   """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene."""
-  return _table_env_class()(k, n_substeps, episode_length)
+  return _table_env_class()(k, n_substeps, episode_length, solver)
 
 
 # --- measurement --------------------------------------------------------------

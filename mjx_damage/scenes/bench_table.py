@@ -47,7 +47,8 @@ def sweep_radius(k: int) -> float:
   return max(0.08, (cols - 1) / 2 * SPACING + 0.02)
 
 
-def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_iterations: int = 8) -> str:
+def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_iterations: int = 8,
+                    solver: str = "CG") -> str:
   """MJCF text of the K-box scene (k >= 1).
 
   Solver iterations are kept small (MJX's recommendation for throughput); the
@@ -55,6 +56,8 @@ def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_ite
   """
   if not isinstance(k, int) or isinstance(k, bool) or k < 1:
     raise ValueError(f"k: number of boxes must be an int >= 1, got {k!r}")
+  if solver not in ("CG", "Newton"):
+    raise ValueError(f"solver: must be 'CG' or 'Newton', got {solver!r}")
   boxes = []
   for i, (x, y) in enumerate(grid_xy(k)):
     boxes.append(
@@ -66,7 +69,7 @@ def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_ite
     )
   r = sweep_radius(k) + 0.2
   return f"""<mujoco model="bench_table_{k}">
-  <option timestep="{timestep}" integrator="implicitfast" iterations="{iterations}" ls_iterations="{ls_iterations}"/>
+  <option timestep="{timestep}" integrator="implicitfast" solver="{solver}" iterations="{iterations}" ls_iterations="{ls_iterations}"/>
   <default><geom friction="0.8 0.01 0.001"/></default>
   <worldbody>
     <light pos="0 0 2" dir="0 0 -1"/>
