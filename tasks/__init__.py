@@ -1,0 +1,114 @@
+"""The task suite: registry, construction and scripted policies.
+
+API (evaluation, training and rendering build on exactly this)::
+
+    import tasks
+    tasks.names()                          # ['open_drawer', 'pick_egg', ...]
+    env = tasks.make("place_plate", damage_weight=2.0, obs_mode="paper")
+    state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+    state = jax.jit(env.step)(state, action)          # action f32[4] in [-1, 1]
+    policy = tasks.scripted_policy(env, "safe")       # policy(state, rng) -> action, one env
+    tasks.default_config("place_plate")    # {'episode_length': 100, ...}
+
+``make`` returns the task wrapped in :class:`mjx_damage.wrapper.DamageWrapper`
+(``env.unwrapped`` is the :class:`tasks.base.Task`). Overrides are the wrapper's
+(``damage_weight``, ``terminate_on_destroyed``, ``health_in_obs``, ``params_fn``,
+``safe_threshold``) plus the task's constructor knobs (``episode_length``,
+``n_substeps``, ``obs_mode``, ``terminate_on_success``, ``success_bonus`` and
+task-specific ones); anything else raises ``ValueError`` listing the valid ones.
+
+Adding a task: a module ``tasks/<name>.py`` with a :class:`tasks.base.Task`
+subclass, its scene XML beside it, and one line in ``_REGISTRY`` below.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+
+from mjx_damage.wrapper import DamageWrapper
+
+# name -> "module:Class" (imported lazily: constructing a task loads its scene).
+_REGISTRY = {
+    "place_plate": "tasks.place_plate:PlacePlate",
+}
+
+# Wrapper overrides: make() keyword -> (DamageWrapper keyword, default).
+_WRAPPER_OPTIONS = {
+    "damage_weight": ("weight", 0.0),
+    "terminate_on_destroyed": ("terminate_on_destroyed", False),
+    "health_in_obs": ("health_in_obs", False),
+    "params_fn": ("params_fn", None),
+    "safe_threshold": ("safe_threshold", 95.0),
+}
+
+STYLES = ("safe", "unsafe")
+
+
+def names() -> list[str]:
+  """Registered task names, sorted."""
+  return sorted(_REGISTRY)
+
+
+def task_class(name: str):
+  """The :class:`tasks.base.Task` subclass registered as ``name``."""
+  if name not in _REGISTRY:
+    raise ValueError(f"name: unknown task {name!r}; valid: {', '.join(names())}")
+  module, cls = _REGISTRY[name].split(":")
+  return getattr(importlib.import_module(module), cls)
+
+
+def _task_options(cls) -> dict:
+  """Constructor keywords of a task class (its own and inherited) with their defaults."""
+  opts = {}
+  for klass in reversed(cls.__mro__):
+    init = klass.__dict__.get("__init__")
+    if init is None or klass.__module__.startswith(("brax", "mjx_damage", "builtins")):
+      continue
+    for p in list(inspect.signature(init).parameters.values())[1:]:
+      if p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL):
+        continue
+      opts[p.name] = p.default
+  if opts.get("episode_length", 0) is None:
+    opts["episode_length"] = cls.default_episode_length
+  return opts
+
+
+def default_config(name: str) -> dict:
+  """Every override ``make(name, ...)`` accepts, with its default value."""
+  cls = task_class(name)
+  cfg = {k: v for k, (_, v) in _WRAPPER_OPTIONS.items()}
+  cfg.update(_task_options(cls))
+  return cfg
+
+
+def make(name: str, **overrides):
+  """Build task ``name`` wrapped for damage; ``overrides`` as in :func:`default_config`.
+
+  Raises:
+    ValueError: unknown task name or override (the message lists the valid ones),
+      or an invalid value (named by its field).
+  """
+  cls = task_class(name)
+  valid = default_config(name)
+  for k in overrides:
+    if k not in valid:
+      raise ValueError(f"{k}: unknown override for task {name!r}; valid: {', '.join(sorted(valid))}")
+  wrapper_kw = {_WRAPPER_OPTIONS[k][0]: overrides.get(k, v) for k, (_, v) in _WRAPPER_OPTIONS.items()}
+  task_kw = {k: v for k, v in overrides.items() if k not in _WRAPPER_OPTIONS}
+  env = cls(**task_kw)
+  return DamageWrapper(env, **wrapper_kw)
+
+
+def scripted_policy(env, style: str):
+  """Jittable, vmappable ``policy(state, rng) -> action f32[4]`` for ONE env of ``env``.
+
+  ``style``: ``"safe"`` (the task's safe strategy) or ``"unsafe"`` (its tempting
+  shortcut). ``env`` is what :func:`make` returned (or the bare task).
+  """
+  if style not in STYLES:
+    raise ValueError(f"style: must be one of {', '.join(STYLES)}, got {style!r}")
+  task = getattr(env, "unwrapped", env)
+  if not hasattr(task, "policy"):
+    raise ValueError(f"env: not a task-suite env ({type(task).__name__})")
+  return task.policy(style)
