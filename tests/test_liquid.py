@@ -1,0 +1,250 @@
+"""Liquid model: a glass holds and pours, exposure and fluid damage, conservation, validation.
+
+Scene ``tests/scenes/liquid_glass.xml``: a glass of five box geoms (inner cavity
+60×60 mm, 100 mm deep) on a hinge tilted by a position actuator, and a
+laptop-sized box on the floor. One jitted control step (25 substeps = 0.1 s)
+compiled once per module drives the full-physics scenarios; the long
+conservation run advances the liquid alone against fixed geom poses.
+"""
+
+import os
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+from mujoco import mjx
+
+import mjx_damage as M
+from mjx_damage import geometry as G
+from mjx_damage import liquid as Lq
+from mjx_damage import physics
+
+SCENE = os.path.join(os.path.dirname(__file__), "scenes", "liquid_glass.xml")
+SUBSTEPS = 25
+P = 64
+R = 0.006
+TILT = np.deg2rad(120.0)
+CONFIG = {
+    "entities": {"laptop": {"params": "laptop"}},  # fluid C = 20 particles, Λ = 5
+    "liquid": {"particles": P, "radius": R, "spawn": {"body": "glass", "offset": [0, 0, 0.045], "size": [0.02, 0.02, 0.03]}},
+}
+
+
+@pytest.fixture(scope="module")
+def scene():
+  m = mujoco.MjModel.from_xml_path(SCENE)
+  b = M.bind(m, CONFIG)
+  mx = mjx.put_model(m)
+
+  @jax.jit
+  def control_step(d, ds, ctrl):
+    return physics.step(mx, b, d.replace(ctrl=ctrl), ds, SUBSTEPS)
+
+  return m, mx, b, control_step
+
+
+def in_glass(d, pos) -> np.ndarray:
+  """bool[P]: particle centre inside the glass cavity (glass frame)."""
+  rot = np.asarray(d.xmat[1]).reshape(3, 3)
+  q = (np.asarray(pos) - np.asarray(d.xpos[1])) @ rot
+  return (np.abs(q[:, 0]) < 0.03) & (np.abs(q[:, 1]) < 0.03) & (q[:, 2] > 0.006) & (q[:, 2] < 0.106)
+
+
+def tilt_data(mx, angle):
+  """Fresh data with the glass hinge at ``angle`` rad (qpos = [hinge, laptop free joint])."""
+  d = mjx.make_data(mx)
+  return d.replace(qpos=d.qpos.at[0].set(angle))
+
+
+def min_sdf(b, mx, d, pos) -> float:
+  """Smallest signed distance of any particle centre to any collidable geom, m."""
+  phi, _, _ = G.points_to_geoms(b.liquid.groups, d, mx, jnp.asarray(pos))
+  return float(jnp.min(phi))
+
+
+@pytest.fixture(scope="module")
+def upright_then_tilted(scene):
+  """10 s upright (checked every second), then 3 s tilting to 120°."""
+  m, mx, b, control_step = scene
+  d = mjx.make_data(mx)
+  ds = physics.init_state(b, rng=jax.random.PRNGKey(1))
+  upright = []
+  for i in range(100):
+    d, ds = control_step(d, ds, jnp.zeros(1))
+    if i % 10 == 9:
+      upright.append((in_glass(d, ds.liquid.pos).sum(), min_sdf(b, mx, d, ds.liquid.pos), np.asarray(ds.liquid.pos)))
+  tilted = []
+  for i in range(30):
+    d, ds = control_step(d, ds, jnp.array([TILT]))
+    tilted.append((in_glass(d, ds.liquid.pos).sum(), min_sdf(b, mx, d, ds.liquid.pos)))
+  return upright, tilted, d, ds
+
+
+def test_upright_glass_holds_liquid_for_10_s(upright_then_tilted):
+  upright, _, _, _ = upright_then_tilted
+  for inside, phi, pos in upright:
+    assert inside == P
+    assert phi > -1e-4  # no centre inside a solid (a particle overlaps a wall by at most its radius)
+    assert np.all(np.isfinite(pos))
+  # at rest: the last two seconds barely move (no jitter, no creeping leak)
+  assert np.max(np.abs(upright[-1][2] - upright[-3][2])) < 2e-3
+
+
+def test_tilting_120_degrees_empties_the_glass(upright_then_tilted):
+  _, tilted, d, ds = upright_then_tilted
+  assert abs(float(d.qpos[0]) - TILT) < 0.05
+  assert tilted[-1][0] == 0
+  assert all(phi > -1e-4 for _, phi in tilted)
+  pos = np.asarray(ds.liquid.pos)
+  assert pos.shape == (P, 3) and np.all(np.isfinite(pos))
+  assert np.all(pos[:, 2] > R - 1e-3)  # on or above the floor, none fell through
+
+
+def test_pouring_on_laptop_wets_and_damages_it(scene):
+  m, mx, b, control_step = scene
+  d = mjx.make_data(mx)
+  ds = physics.init_state(b)
+  # a column 4×4×4 on a 2r lattice, 0.1 m above the laptop's top face (z = 0.04)
+  g = (np.arange(4) - 1.5) * 2 * R
+  col = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) + [0.4, 0.0, 0.14 + 1.5 * 2 * R]
+  ds = ds.replace(liquid=Lq.LiquidState(pos=jnp.asarray(col, jnp.float32), vel=jnp.zeros((P, 3))))
+  exposure, fluid = [], []
+  for _ in range(10):
+    d, ds = control_step(d, ds, jnp.zeros(1))
+    exposure.append(float(ds.exposure[0]))
+    fluid.append(float(ds.step_damage.fluid[0]))
+  assert exposure[0] == 0.0 and fluid[0] == 0.0  # still falling
+  assert max(exposure) > 20.0  # above C_fluid
+  assert max(fluid) > 0.0
+  assert float(ds.link_health[0]) < 100.0
+
+
+def test_exposure_counts_particles_within_contact_distance(scene):
+  m, mx, b, _ = scene
+  d = jax.jit(mjx.forward)(mx, mjx.make_data(mx))
+  top = 0.02 + 0.01  # laptop top face, m
+  on = np.stack([np.linspace(0.3, 0.5, 30), np.zeros(30), np.full(30, top + R)], -1)  # resting on it
+  near = np.array([[0.4, 0.05, top + R + 0.5 * R]])  # gap r/2 < contact distance r
+  away = np.stack([np.linspace(-1, -0.5, P - 31), np.full(P - 31, 1.0), np.full(P - 31, 0.5)], -1)
+  pos = jnp.asarray(np.concatenate([on, near, away]), jnp.float32)
+  ds = physics.init_state(b).replace(liquid=Lq.LiquidState(pos=pos, vel=jnp.zeros((P, 3))))
+  out = jax.jit(lambda ds: Lq.advance(mx, b, d, ds, 1e-4))(ds)  # tiny dt: nothing moves appreciably
+  assert float(out.exposure[0]) == 31.0
+
+
+def test_count_conserved_and_finite_over_1e4_steps(scene):
+  """10⁴ substeps of the liquid alone against the glass held at 120°: P finite particles, none in a solid."""
+  m, mx, b, _ = scene
+  d = jax.jit(mjx.forward)(mx, tilt_data(mx, TILT))
+  ds = physics.init_state(b, rng=jax.random.PRNGKey(2))
+  dt = float(m.opt.timestep)
+
+  @jax.jit
+  def run(ds):
+    def body(ds, _):
+      ds = Lq.advance(mx, b, d, ds, dt)
+      phi, _, _ = G.points_to_geoms(b.liquid.groups, d, mx, ds.liquid.pos)
+      ok = jnp.all(jnp.isfinite(ds.liquid.pos)) & jnp.all(jnp.isfinite(ds.liquid.vel))
+      return ds, (ok, jnp.min(phi), ds.liquid.pos.shape[0])
+
+    return jax.lax.scan(body, ds, None, length=10_000)
+
+  ds, (ok, phi, count) = run(ds)
+  assert np.all(np.asarray(ok))
+  assert float(np.min(np.asarray(phi))) > -1e-4
+  assert np.all(np.asarray(count) == P) and ds.liquid.pos.shape == (P, 3)
+  assert np.all(np.asarray(ds.liquid.pos)[:, 2] > R - 1e-3)
+
+
+@pytest.mark.slow
+def test_count_conserved_full_physics_1e4_steps(scene):
+  """10⁴ substeps of the full damage step while the glass swings back and forth."""
+  m, mx, b, control_step = scene
+  d = mjx.make_data(mx)
+  ds = physics.init_state(b)
+  for i in range(10_000 // SUBSTEPS):
+    d, ds = control_step(d, ds, jnp.array([TILT * (i // 50 % 2)]))
+    pos = np.asarray(ds.liquid.pos)
+    assert pos.shape == (P, 3) and np.all(np.isfinite(pos))
+    assert np.all(np.isfinite(np.asarray(ds.exposure)))
+
+
+def test_sdf_matches_simple_cases():
+  q = jnp.array([[0.0, 0.0, 2.0], [0.5, 0.0, 0.0], [3.0, 0.0, 0.0]])
+  size = jnp.array([1.0, 1.0, 1.0])
+  phi, n = G.sdf(G.BOX, q, size)
+  np.testing.assert_allclose(np.asarray(phi), [1.0, -0.5, 2.0], atol=1e-6)
+  np.testing.assert_allclose(np.asarray(n), [[0, 0, 1], [1, 0, 0], [1, 0, 0]], atol=1e-6)
+  phi, _ = G.sdf(G.SPHERE, q, size)
+  np.testing.assert_allclose(np.asarray(phi), [1.0, -0.5, 2.0], atol=1e-6)
+  phi, n = G.sdf(G.CAPSULE, jnp.array([[0.0, 0.0, 3.0], [2.0, 0.0, 0.5]]), jnp.array([0.5, 1.0, 0.0]))
+  np.testing.assert_allclose(np.asarray(phi), [1.5, 1.5], atol=1e-6)
+  phi, n = G.sdf(G.CYLINDER, jnp.array([[0.0, 0.0, 3.0], [2.0, 0.0, 0.5], [0.0, 0.9, 0.0]]),
+                 jnp.array([1.0, 1.0, 0.0]))
+  np.testing.assert_allclose(np.asarray(phi), [2.0, 1.0, -0.1], atol=1e-6)
+  np.testing.assert_allclose(np.asarray(n), [[0, 0, 1], [1, 0, 0], [0, 1, 0]], atol=1e-6)
+  phi, n = G.sdf(G.PLANE, q, size)
+  np.testing.assert_allclose(np.asarray(phi), [2.0, 0.0, 0.0], atol=1e-6)
+
+
+def _with(**liquid):
+  cfg = {"entities": CONFIG["entities"], "liquid": {**CONFIG["liquid"], **liquid}}
+  return cfg
+
+
+@pytest.mark.parametrize(
+    "liquid, field",
+    [
+        ({"particles": 0}, "liquid.particles"),
+        ({"particles": 64.0}, "liquid.particles"),
+        ({"particles": True}, "liquid.particles"),
+        ({"radius": -0.01}, "liquid.radius"),
+        ({"radius": float("nan")}, "liquid.radius"),
+        ({"damping": -1}, "liquid.damping"),
+        ({"friction": 2}, "liquid.friction"),
+        ({"pair_stiffness": "soft"}, "liquid.pair_stiffness"),
+        ({"max_speed": 0}, "liquid.max_speed"),
+        ({"iterations": 0}, "liquid.iterations"),
+        ({"contact_distance": float("inf")}, "liquid.contact_distance"),
+        ({"exclude": ["nope"]}, r"liquid.exclude\[0\]"),
+        ({"exclude": "floor"}, "liquid.exclude"),
+        ({"viscosity": 1}, "liquid.viscosity"),
+        ({"spawn": {"body": "cup", "size": [0.01, 0.01, 0.01]}}, "liquid.spawn.body"),
+        ({"spawn": {"center": [0, 0], "size": [0.01, 0.01, 0.01]}}, "liquid.spawn.center"),
+        ({"spawn": {"center": [0, 0, 1], "size": [0.001, 0.001, 0.001]}}, "liquid.spawn.size"),
+        ({"spawn": {"center": [0, 0, 1], "body": "glass", "size": [0.1, 0.1, 0.1]}}, "liquid.spawn"),
+        ({"spawn": {"center": [0, 0, 1], "size": [0.1, -0.1, 0.1]}}, r"liquid.spawn.size\[1\]"),
+        ({"spawn": None}, "liquid.spawn"),
+    ],
+)
+def test_bad_configs_name_the_field(liquid, field):
+  m = mujoco.MjModel.from_xml_path(SCENE)
+  with pytest.raises(ValueError, match="^" + field.replace(".", r"\.") + ":"):
+    M.bind(m, _with(**liquid))
+
+
+def test_missing_particles_and_wrong_type():
+  m = mujoco.MjModel.from_xml_path(SCENE)
+  with pytest.raises(ValueError, match=r"^liquid\.particles:"):
+    M.bind(m, {"entities": CONFIG["entities"], "liquid": {"spawn": CONFIG["liquid"]["spawn"]}})
+  with pytest.raises(ValueError, match=r"^liquid:"):
+    M.bind(m, {"entities": CONFIG["entities"], "liquid": 128})
+
+
+def test_no_liquid_config_is_zero_cost():
+  m = mujoco.MjModel.from_xml_path(SCENE)
+  b = M.bind(m, {"entities": CONFIG["entities"]})
+  assert b.liquid is None
+  ds = physics.init_state(b)
+  assert ds.liquid is None
+  assert Lq.advance(None, b, None, ds, 0.004) is ds
+
+
+def test_spawn_follows_the_body(scene):
+  m, mx, b, _ = scene
+  d = jax.jit(mjx.forward)(mx, tilt_data(mx, 0.5))
+  st = Lq.spawn(b, jax.random.PRNGKey(0), d)
+  assert np.all(in_glass(d, st.pos)) and np.all(np.asarray(st.vel) == 0.0)
+  assert min_sdf(b, mx, d, st.pos) > R - 1e-4  # not overlapping the glass
