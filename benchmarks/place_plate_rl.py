@@ -148,17 +148,18 @@ def write_results(path_base, payload):
   lines += ["", "Targets: task-only safe completion ≤ 20 %; both damage-aware runs ≥ 80 % safe with ≥ 80 % "
             "completion; on one H100 damage-aware ≥ 80 % safe in ≤ 5 min and ≥ 100 k env-steps/s.", ""]
   lines += ["## Where the time goes", "",
-            "Seconds per run: compile (first iteration, incl. tracing), training iterations, evaluations, "
+            "Seconds per run: compile (first training iteration incl. tracing; first evaluation), training "
+            "iterations, evaluations, "
             "checkpoints, host-side logging/transfers. Per iteration (profile): rollout = env step + policy "
             "inference over all envs; update = reward shaping + normaliser + SGD epochs.", "",
-            "| run | compile | iterations | eval | checkpoint | host | iteration (s) | rollout (s) | update (s) "
+            "| run | compile (train, eval) | iterations | eval | checkpoint | host | iteration (s) | rollout (s) | update (s) "
             "| rollout share |", "|---|---|---|---|---|---|---|---|---|---|"]
   for name, r in payload["runs"].items():
     t = r["timings"]
     it = t.get("profile/iteration")
     prof = (f"{it:.3f} | {t['profile/rollout']:.3f} | {t['profile/update']:.3f} | "
             f"{t['profile/rollout'] / it:.0%}") if it else "— | — | — | —"
-    lines.append(f"| {r['label']} | {t['compile']:.1f} | {t['iterations']:.1f} | {t['eval']:.1f} | "
+    lines.append(f"| {r['label']} | {t['compile']:.1f}, {t.get('eval_compile', 0):.1f} | {t['iterations']:.1f} | {t['eval']:.1f} | "
                  f"{t['checkpoint']:.1f} | {t['host']:.2f} | {prof} |")
   if payload.get("bottleneck"):
     lines += ["", payload["bottleneck"]]

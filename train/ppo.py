@@ -639,7 +639,7 @@ class TrainResult:
   throughput: float  # training env-steps per second of train_time
   final_eval: dict
   history: list  # one dict per evaluation (the rows of metrics.jsonl)
-  timings: dict  # s: compile, iterations, eval, checkpoint, host (logging/transfers)
+  timings: dict  # s: compile (1st iteration), eval_compile (1st eval), iterations, eval, checkpoint, host
   policy: Callable  # policy(state, rng) -> action for ONE env, deterministic
   train_state: TrainState
   stopped_early: bool = False
@@ -784,7 +784,8 @@ def train(
   }
 
   # -- initial state: fresh or from the checkpoint --------------------------
-  timings = {"compile": 0.0, "iterations": 0.0, "eval": 0.0, "checkpoint": 0.0, "host": 0.0}
+  timings = {"compile": 0.0, "eval_compile": 0.0, "iterations": 0.0, "eval": 0.0, "checkpoint": 0.0, "host": 0.0}
+  first_eval = True
   rows: list = []
   if resume and ckpt_path and os.path.exists(ckpt_path):
     old = ckpt.read_meta(ckpt_path)
@@ -856,7 +857,9 @@ def train(
       t0 = time.perf_counter()
       per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, iteration))
       ev = summarize_episodes(per_ep)
-      timings["eval"] += time.perf_counter() - t0
+      # The first evaluation compiles the evaluation program: book it apart.
+      timings["eval_compile" if first_eval else "eval"] += time.perf_counter() - t0
+      first_eval = False
       n = window.get("episodes", 0.0)
       row = {"iteration": iteration, "env_steps": iteration * cfg.steps_per_iteration,
              "wall_time": round(time.perf_counter() - t_start, 3),
