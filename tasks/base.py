@@ -12,7 +12,9 @@ attributes, ``name``, ``xml`` (file name beside the module), ``entities``
 * ``evaluate(d, info) -> (reward f32[], success f32[], extra_metrics dict)`` —
   dense task reward and the success condition (1.0 while it holds);
 * ``policy(style) -> policy(state, rng) -> action`` for ``style in ("safe", "unsafe")``;
-* optional: ``obs_modes`` (extra observation layouts, e.g. the paper's 6-D one).
+* optional: ``obs_modes`` + ``mode_obs`` (extra observation layouts, e.g. the
+  paper's 6-D one), ``update_info(d, info) -> info`` (task state that evolves,
+  e.g. which dirt is wiped; called after every control step), ``setup(mj_model)``.
 
 Everything in ``reset``/``step`` is a pure function of (rng / state, action):
 jit and vmap them. The environment's ``State``:
@@ -117,6 +119,10 @@ class Task(DamageEnv):
   def policy(self, style: str) -> Policy:
     raise NotImplementedError
 
+  def update_info(self, d: mjx.Data, info: dict) -> dict:
+    """Advance task state kept in ``info`` after a control step (default: none)."""
+    return info
+
   def mode_obs(self, mode: str, d: mjx.Data, info: dict) -> jax.Array:
     """Observation of a non-default ``obs_mode`` (tasks with extra layouts override this)."""
     raise ValueError(f"obs_mode: unknown {mode!r}")
@@ -151,7 +157,7 @@ class Task(DamageEnv):
     d0 = state.pipeline_state
     ctrl = self.robot.ctrl(d0, action, self.ws_lo, self.ws_hi)
     d, ds = self.physics_step(d0, state.info["damage_state"], ctrl)
-    info = dict(state.info, damage_state=ds, step=state.info["step"] + 1)
+    info = self.update_info(d, dict(state.info, damage_state=ds, step=state.info["step"] + 1))
     reward, success, extra = self.evaluate(d, info)
     success = success.astype(jnp.float32)
     reward = (reward + self.success_bonus * success).astype(jnp.float32)
