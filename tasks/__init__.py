@@ -30,6 +30,7 @@ from mjx_damage.wrapper import DamageWrapper
 
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
+    "open_drawer": "tasks.open_drawer:OpenDrawer",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
 }
