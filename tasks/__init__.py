@@ -33,6 +33,7 @@ _REGISTRY = {
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
+    "turn_on_stove": "tasks.turn_on_stove:TurnOnStove",
 }
 
 # Wrapper overrides: make() keyword -> (DamageWrapper keyword, default).
