@@ -177,44 +177,69 @@ def make_runner(env, damage: bool):
   return jax.jit(run, donate_argnums=(0, 1))
 
 
-def measure(env, envs: int, damage: bool, target_s: float, max_steps: int, seed: int = 0) -> dict:
-  """Compile once, time one step, then time enough steps for about ``target_s`` seconds."""
+def measure_pair(env, envs: int, target_s: float, max_steps: int, repeats: int = 1, seed: int = 0):
+  """Damage on and off at one (K, envs): compile both, then alternate timed runs.
+
+  Both settings run the same number of env steps from the same initial state;
+  on/off timings are interleaved (on, off, on, off, ...) and the best of
+  ``repeats`` is kept for each, so a load change on a shared machine hits both
+  alike. When a single env step already exceeds ``target_s`` (big batches on
+  CPU), that first timed call is the measurement (``steps`` = 1).
+
+  Returns:
+    (row_on, row_off): dicts with env_steps_per_s, physics_steps_per_s,
+    compile_s, the timings of every repeat, peak memory so far and load.
+  """
   import jax
   import jax.numpy as jnp
 
-  d, ds, _ = batched_initial_state(env, envs, seed)
-  run = make_runner(env, damage)
-  t0 = time.perf_counter()
-  compiled = run.lower(d, ds, jnp.int32(1)).compile()
-  compile_s = time.perf_counter() - t0
-  t0 = time.perf_counter()
-  d, ds = jax.block_until_ready(compiled(d, ds, jnp.int32(1)))
-  first_s = time.perf_counter() - t0
-  if first_s >= target_s:
-    # one step already fills the time box (big batches on CPU): it is the timing
-    steps, secs = 1, first_s
-  else:
-    steps = int(min(max_steps, max(2, math.ceil(target_s / max(first_s, 1e-6)))))
+  runs = {}
+  for damage in (True, False):
+    d, ds, _ = batched_initial_state(env, envs, seed)
     t0 = time.perf_counter()
-    d, ds = jax.block_until_ready(compiled(d, ds, jnp.int32(steps)))
-    secs = time.perf_counter() - t0
-  out = {
-      "envs": envs,
-      "entities": env.k,
-      "damage": damage,
-      "steps": steps,
-      "seconds": secs,
-      "env_steps_per_s": envs * steps / secs,
-      "physics_steps_per_s": envs * steps * env.n_substeps / secs,
-      "compile_s": compile_s,
-      "first_call_s": first_s,
-  }
-  if damage:
-    out["mean_min_health"] = float(jnp.mean(jnp.min(ds.link_health, axis=-1)))
-  # 1-min load average: on a shared machine other processes' load lowers the numbers
-  out["loadavg_1min"] = os.getloadavg()[0]
-  out.update(peak_memory_bytes())
-  return out
+    compiled = make_runner(env, damage).lower(d, ds, jnp.int32(1)).compile()
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    d, ds = jax.block_until_ready(compiled(d, ds, jnp.int32(1)))
+    runs[damage] = {"compiled": compiled, "state": (d, ds), "compile_s": compile_s,
+                    "first_s": time.perf_counter() - t0, "times": []}
+  first = max(r["first_s"] for r in runs.values())
+  if first >= target_s:
+    steps = 1
+    for r in runs.values():
+      r["times"].append(r["first_s"])
+    repeats -= 1
+  else:
+    steps = int(min(max_steps, max(2, math.ceil(target_s / max(first, 1e-6)))))
+  for _ in range(max(repeats, 0)):
+    for damage in (True, False):
+      r = runs[damage]
+      t0 = time.perf_counter()
+      r["state"] = jax.block_until_ready(r["compiled"](*r["state"], jnp.int32(steps)))
+      r["times"].append(time.perf_counter() - t0)
+  rows = []
+  for damage in (True, False):
+    r = runs[damage]
+    secs = min(r["times"])
+    row = {
+        "envs": envs,
+        "entities": env.k,
+        "damage": damage,
+        "steps": steps,
+        "seconds": secs,
+        "seconds_all_repeats": r["times"],
+        "env_steps_per_s": envs * steps / secs,
+        "physics_steps_per_s": envs * steps * env.n_substeps / secs,
+        "compile_s": r["compile_s"],
+        "first_call_s": r["first_s"],
+        # 1-min load average: on a shared machine other processes' load lowers the numbers
+        "loadavg_1min": os.getloadavg()[0],
+    }
+    if damage:
+      row["mean_min_health"] = float(jnp.mean(jnp.min(r["state"][1].link_health, axis=-1)))
+    row.update(peak_memory_bytes())
+    rows.append(row)
+  return rows[0], rows[1]
 
 
 def measure_task(name: str, envs: int, target_s: float, max_steps: int) -> dict:
@@ -316,35 +341,36 @@ def run_benchmark(args) -> dict:
 
   done = {}
 
-  def point(k, n, damage, section):
-    key = (k, n, damage)
+  def point(k, n, section):
+    key = (k, n)
     if key not in done:
       if budget.left() <= 0:
-        result["skipped"].append({"entities": k, "envs": n, "damage": damage, "why": "time budget spent"})
-        return None
-      print(f"  K={k:>2} envs={n:>5} damage={'on ' if damage else 'off'} ...", end="", flush=True)
-      done[key] = measure(env_for(k), n, damage, args.target_s, args.max_steps)
-      r = done[key]
-      print(f" {r['env_steps_per_s']:>12,.0f} env-steps/s  compile {r['compile_s']:.1f} s", flush=True)
-    result[section].append(done[key])
-    return done[key]
+        result["skipped"].append({"entities": k, "envs": n, "why": "time budget spent"})
+        return
+      print(f"  K={k:>2} envs={n:>5} ...", end="", flush=True)
+      try:
+        done[key] = measure_pair(env_for(k), n, args.target_s, args.max_steps, args.repeats)
+      except Exception as e:  # e.g. device out of memory at the largest batch: keep the rest of the run
+        print(f" failed: {type(e).__name__}: {str(e)[:200]}", flush=True)
+        result["skipped"].append({"entities": k, "envs": n, "why": f"{type(e).__name__}: {str(e)[:300]}"})
+        return
+      on, off = done[key]
+      print(f" on {on['env_steps_per_s']:>11,.1f}  off {off['env_steps_per_s']:>11,.1f} env-steps/s"
+            f"  compile {on['compile_s']:.0f}/{off['compile_s']:.0f} s", flush=True)
+    result[section].extend(done[key])
 
   # Order = importance, so a spent budget drops the least important points:
   # 1. the on/off ratio at the target batch with K tracked boxes; 2. K=1 there;
   # 3. reference pipeline; 4. task throughput; 5. the rest of both curves.
   top = max(envs_list)
   target_n = args.ratio_envs if args.ratio_envs else top
-  first = [(k_main, target_n, d, "vs_envs") for d in (True, False)]
-  first += [(1, fixed, d, "vs_entities") for d in (True, False)]
-  first += [(k_main, fixed, d, "vs_entities") for d in (True, False)]
-  ent_pts = [(k, fixed, d, "vs_entities") for k in ents for d in (True, False)]
-  env_pts = [(k_main, n, d, "vs_envs") for n in envs_list for d in (True, False)]
-  ent_pts = [r for r in ent_pts if r not in first]
-  env_pts = [r for r in env_pts if r not in first]
-  # alternate pairs (on, off) of the two curves so a spent budget thins both evenly
+  first = [(k_main, target_n, "vs_envs"), (1, fixed, "vs_entities"), (k_main, fixed, "vs_entities")]
+  ent_pts = [(k, fixed, "vs_entities") for k in ents if (k, fixed, "vs_entities") not in first]
+  env_pts = [(k_main, n, "vs_envs") for n in envs_list if (k_main, n, "vs_envs") not in first]
+  # alternate the two curves so a spent budget thins both evenly
   rest = []
-  for i in range(0, max(len(ent_pts), len(env_pts)), 2):
-    rest += ent_pts[i:i + 2] + env_pts[i:i + 2]
+  for i in range(max(len(ent_pts), len(env_pts))):
+    rest += ent_pts[i:i + 1] + env_pts[i:i + 1]
   for item in first:
     point(*item)
 
@@ -374,7 +400,10 @@ def run_benchmark(args) -> dict:
 
       if args.task in tasks.names():
         print(f"  task {args.task} x {args.task_envs} envs ...", flush=True)
-        result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps)
+        try:
+          result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps)
+        except Exception as e:  # keep the rest of the run
+          result["skipped"].append({"task": args.task, "why": f"{type(e).__name__}: {str(e)[:300]}"})
       else:
         result["skipped"].append({"task": args.task, "why": "not in tasks.names()"})
     except (ImportError, AttributeError) as e:
@@ -412,6 +441,18 @@ def summarize(result: dict, k_main: int, target_n: int, fixed: int) -> dict:
   if one_off and many_off:
     s[f"entities_{k_main}_over_1_throughput_damage_off_{fixed}envs"] = (
         many_off["env_steps_per_s"] / one_off["env_steps_per_s"])
+  # damage-tracking overhead per K (on/off at the same K and batch): separates what
+  # tracking costs from what simulating K free bodies costs
+  s["damage_on_off_ratio_by_entities"] = {
+      str(r["entities"]): r["env_steps_per_s"] / off_r["env_steps_per_s"]
+      for r in result["vs_entities"] if r["damage"]
+      for off_r in [_lookup(result["vs_entities"], entities=r["entities"], envs=r["envs"], damage=False)] if off_r
+  }
+  s["damage_on_off_ratio_by_envs"] = {
+      str(r["envs"]): r["env_steps_per_s"] / off_r["env_steps_per_s"]
+      for r in result["vs_envs"] if r["damage"]
+      for off_r in [_lookup(result["vs_envs"], entities=r["entities"], envs=r["envs"], damage=False)] if off_r
+  }
   for k, ref in result.get("reference", {}).items():
     best = max((r for r in rows if r["entities"] == int(k) and r["damage"]),
                key=lambda r: r["env_steps_per_s"], default=None)
@@ -503,6 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
   ap.add_argument("--substeps", type=int, default=5, help="physics steps per env step (default 5)")
   ap.add_argument("--target-s", type=float, default=2.0, help="seconds each timed run aims for")
   ap.add_argument("--max-steps", type=int, default=200, help="most env steps per timed run")
+  ap.add_argument("--repeats", type=int, default=2, help="timed runs per setting, on/off interleaved; best kept")
   ap.add_argument("--ref-envs", type=int, default=4, help="environments the reference pipeline runs")
   ap.add_argument("--ref-steps", type=int, default=25, help="env steps per reference environment")
   ap.add_argument("--ref-max-s", type=float, default=20.0, help="stop the reference after about this long")
@@ -529,7 +571,8 @@ def main(argv=None) -> int:
   try:
     envs = _parse_ints("--envs", args.envs)
     _parse_ints("--entities", args.entities)
-    for name in ("k", "entity_envs", "ratio_envs", "substeps", "max_steps", "ref_envs", "ref_steps", "task_envs"):
+    for name in ("k", "entity_envs", "ratio_envs", "substeps", "max_steps", "ref_envs", "ref_steps", "task_envs",
+                 "repeats"):
       if getattr(args, name) < 1:
         raise ValueError(f"--{name.replace('_', '-')}: must be >= 1, got {getattr(args, name)}")
     if args.ratio_envs not in envs:
