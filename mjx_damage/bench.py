@@ -89,8 +89,8 @@ def _table_env_class():
 
     def reset(self, rng: jax.Array) -> State:
       rng, qr = jax.random.split(rng)
+      # no forward pass here: every physics substep starts with one (keeps reset cheap to compile)
       d = mjx.make_data(self.sys).replace(qpos=self.initial_qpos(qr))
-      d = mjx.forward(self.sys, d)
       info = {"damage_state": self.init_damage(rng), "box0_start": d.qpos[self._box_q[0] : self._box_q[0] + 2]}
       z = jnp.zeros(())
       return State(d, self._obs(d), z, z, {"success": z}, info)
