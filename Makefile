@@ -5,7 +5,12 @@ PY     := $(VENV)/bin/python
 export JAX_COMPILATION_CACHE_DIR ?= $(CURDIR)/.jax_cache
 export MPLBACKEND ?= Agg
 
-.PHONY: demo test test-slow bench install clean
+# Headless rendering (mjx-damage render, tests/test_render.py) uses MuJoCo's OSMesa
+# backend: software OpenGL from Debian's libosmesa6. Installed here when missing and
+# when we can (root with apt-get, as on CI); otherwise a note says what to install.
+SYSTEM_PACKAGES := libosmesa6
+
+.PHONY: demo test test-slow bench install clean system-deps
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -13,7 +18,16 @@ $(VENV)/.installed: pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $@
 
-install: $(VENV)/.installed
+system-deps:
+	@missing=""; for p in $(SYSTEM_PACKAGES); do \
+	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -z "$$missing" ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing system packages:$$missing"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
+	else echo "note: headless rendering needs:$$missing (sudo apt-get install$$missing)"; fi
+
+install: system-deps $(VENV)/.installed
 
 demo: install
 	$(VENV)/bin/mjx-damage demo

@@ -1,0 +1,220 @@
+"""Seeing damage: tinted frames, health-bar overlay, video files, plots, CLI errors.
+
+The frames come from the built-in drop scene (plates falling onto a counter
+beside a resting mug) because a fall damages a plate within a few steps: 8
+environments, 9 steps (10 frames each), one compiled step. Seed 3 drops env 0's
+plate low enough to hit and break within those steps; the other envs' plates
+are still intact. The CLI test runs the same task/policy/batch, so its step
+program is the same and comes from the persistent compilation cache.
+
+Rendering is headless (OSMesa from Debian's libosmesa6, installed by `make
+install`): if the GL library is missing these tests FAIL with the package name.
+"""
+
+import json
+import os
+
+import imageio.v2 as imageio
+import numpy as np
+import pytest
+
+from mjx_damage import plots
+from mjx_damage import render as R
+
+W, H = 160, 120
+STEPS, NUM_ENVS, SEED = 9, 8, 3
+DAMAGED_ENV = 0
+
+
+def redness(rgb):
+  """Mean of R − (G + B)/2 over pixels (f[..., 3] 0–255): 0 for greys, > 0 for reds."""
+  rgb = np.asarray(rgb, np.float32)
+  return float(np.mean(rgb[..., 0] - 0.5 * (rgb[..., 1] + rgb[..., 2])))
+
+
+def entity_pixels(seg, traj, entity):
+  """Mask of pixels showing a geom of ``entity`` in a geom-id image."""
+  name_id = traj.entity_names.index(entity)
+  geom_entity = np.where(traj.geom_link >= 0, traj.link_entity[np.maximum(traj.geom_link, 0)], -1)
+  lut = np.append(geom_entity, -1)  # index −1 (background) → −1
+  return lut[seg] == name_id
+
+
+@pytest.fixture(scope="module")
+def gl():
+  try:
+    return R.ensure_gl()
+  except RuntimeError as e:
+    pytest.fail(f"headless OpenGL unavailable — run `make install` as root (it installs libosmesa6): {e}")
+
+
+@pytest.fixture(scope="module")
+def drop(gl, tmp_path_factory):
+  from train.evaluate import make_policy, make_task
+
+  env = make_task("drop")
+  policy = make_policy("zero", env)
+  out = tmp_path_factory.mktemp("render") / "drop.mp4"
+  res = R.render_rollout(env, policy, steps=STEPS, seed=SEED, out=str(out), width=W, height=H,
+                         num_envs=NUM_ENVS, fps=25)
+  model = R.mj_model_of(env)
+  seg = {b: R.render_frames(model, res.trajectory, width=W, height=H, env_index=b, segmentation=True)
+         for b in range(NUM_ENVS)}
+  return env, res, seg, out
+
+
+# --- pure helpers -------------------------------------------------------------------------
+def test_tint_is_lerp_toward_red_by_lost_health():
+  base = np.array([[1, 1, 1, 1], [1, 1, 1, 0.5], [0.2, 0.4, 0.8, 1], [0.5, 0.5, 0.5, 1]], np.float32)
+  geom_link = np.array([0, 1, -1, 1])
+  out = R.tinted_rgba(base, geom_link, np.array([100.0, 0.0]))
+  np.testing.assert_array_equal(out[0], base[0])  # intact link: untouched
+  np.testing.assert_allclose(out[1, :3], R.TINT_RGB)  # destroyed: fully red
+  assert out[1, 3] == 0.5  # alpha kept
+  np.testing.assert_array_equal(out[2], base[2])  # untracked geom: untouched
+  half = R.tinted_rgba(base, geom_link, np.array([50.0, 50.0]))
+  np.testing.assert_allclose(half[0, :3], 0.5 * base[0, :3] + 0.5 * R.TINT_RGB)
+  np.testing.assert_array_equal(base[1], [1, 1, 1, 0.5])  # input not modified
+  reds = [redness(R.tinted_rgba(base, geom_link, np.array([h, h]))[0, :3] * 255) for h in (100, 75, 50, 25, 0)]
+  assert np.all(np.diff(reds) > 0)
+
+
+def test_health_colour_green_to_red():
+  assert R.health_color(100) == (0, 200, 40)
+  assert R.health_color(0) == (220, 0, 40)
+  r, g, _ = R.health_color(50)
+  assert r > 150 and g > 150  # yellow midway
+  assert R.health_color(150) == R.health_color(100) and R.health_color(-5) == R.health_color(0)
+
+
+def test_overlay_bars_follow_health():
+  frame = np.zeros((H, W, 3), np.uint8)
+  names = ("plate", "mug")
+  a = R.draw_health_bars(frame, names, [100.0, 100.0], caption="t 0.00 s")
+  b = R.draw_health_bars(frame, names, [40.0, 100.0], caption="t 0.00 s")
+  assert not np.shares_memory(a, frame) and frame.max() == 0
+  (px0, py0, px1, py1), (mx0, my0, mx1, my1) = R.health_bar_boxes(H, W, names)
+  plate_a, plate_b = a[py0:py1 + 1, px0:px1 + 1], b[py0:py1 + 1, px0:px1 + 1]
+  # full bar: all green; at 40: the right 60 % is the grey background, the fill is red-orange
+  assert np.all(plate_a[:, :, 1] > 150) and np.all(plate_a[:, :, 0] < 50)
+  right = plate_b[:, int(0.5 * (px1 - px0)):]
+  assert np.all(right == 70)
+  assert plate_b[2, 2, 0] > plate_b[2, 2, 1]  # 40 → more red than green
+  np.testing.assert_array_equal(a[my0:my1 + 1, mx0:mx1 + 1], b[my0:my1 + 1, mx0:mx1 + 1])
+
+
+# --- rendered rollouts ----------------------------------------------------------------------
+def test_damaged_plate_turns_red_and_its_bar_changes(drop):
+  _, res, seg, _ = drop
+  traj, frames = res.trajectory, res.frames[DAMAGED_ENV]
+  assert frames.shape == (STEPS + 1, H, W, 3) and frames.dtype == np.uint8
+  plate = traj.entity_names.index("plate")
+  health = traj.entity_health[:, DAMAGED_ENV, plate]
+  assert health[0] == 100.0 and health[-1] < 90.0, f"seed {SEED} env {DAMAGED_ENV} should break its plate: {health}"
+  m0 = entity_pixels(seg[DAMAGED_ENV][0], traj, "plate")
+  m1 = entity_pixels(seg[DAMAGED_ENV][-1], traj, "plate")
+  assert m0.sum() > 50 and m1.sum() > 50, "the plate should be in view"
+  r0, r1 = redness(frames[0][m0]), redness(frames[-1][m1])
+  assert r1 > r0 + 15, f"plate redness {r0:.1f} → {r1:.1f} at health {health[-1]:.1f}"
+  # the mug rests undamaged beside it: no tint on its pixels
+  mug0 = entity_pixels(seg[DAMAGED_ENV][0], traj, "mug")
+  mug1 = entity_pixels(seg[DAMAGED_ENV][-1], traj, "mug")
+  assert abs(redness(frames[-1][mug1]) - redness(frames[0][mug0])) < 3
+  # the plate's bar differs, the mug's (still 100) does not
+  (px0, py0, px1, py1), (mx0, my0, mx1, my1) = R.health_bar_boxes(H, W, traj.entity_names)
+  assert np.abs(frames[-1][py0:py1, px0:px1].astype(int) - frames[0][py0:py1, px0:px1]).mean() > 20
+  np.testing.assert_array_equal(frames[-1][my0:my1, mx0:mx1], frames[0][my0:my1, mx0:mx1])
+
+
+def test_no_tint_where_health_stays_100(drop):
+  env, res, seg, _ = drop
+  traj = res.trajectory
+  intact = [b for b in range(NUM_ENVS) if np.all(traj.entity_health[:, b] == 100.0)]
+  assert intact, "expected some env without damage in this batch"
+  model = R.mj_model_of(env)
+  b = intact[0]
+  # the tint is a no-op there: frames with and without it are identical
+  plain = R.render_frames(model, traj, width=W, height=H, env_index=b, tint=False)
+  np.testing.assert_array_equal(plain, res.frames[b])
+  m = entity_pixels(seg[b][-1], traj, "plate")
+  assert redness(res.frames[b][-1][m]) < 10
+
+
+def test_video_files_decode(drop, tmp_path):
+  _, res, _, out = drop
+  assert [os.path.basename(p) for p in res.paths] == ["drop.mp4"] + [f"drop_env{b}.mp4" for b in range(1, NUM_ENVS)]
+  video = np.stack(imageio.mimread(str(out), format="FFMPEG"))
+  assert video.shape == (STEPS + 1, H, W, 3)
+  assert np.abs(video.astype(int) - res.frames[0]).mean() < 12  # lossy, but the same pictures
+  gif = R.write_video(res.frames[DAMAGED_ENV], str(tmp_path / "drop.gif"), fps=25)
+  frames = imageio.mimread(gif)
+  assert len(frames) == STEPS + 1 and frames[0].shape[:2] == (H, W)
+
+
+def test_rollout_plots(drop, tmp_path):
+  _, res, _, _ = drop
+  traj = res.trajectory
+  assert traj.link_names[plots.most_damaged_link(traj, DAMAGED_ENV)] == "plate/plate"
+  assert traj.f_par[:, DAMAGED_ENV].max() + traj.f_perp[:, DAMAGED_ENV].max() > traj.mech_threshold[DAMAGED_ENV].min()
+  paths = plots.plot_rollout(traj, str(tmp_path), env_index=DAMAGED_ENV, title="drop")
+  assert set(paths) == {"health", "load", "cost", "rollout"}
+  for p in paths.values():
+    img = imageio.imread(p)
+    assert img.shape[0] > 200 and img.std() > 10
+
+
+def test_training_log_plot(tmp_path):
+  run = tmp_path / "run"
+  run.mkdir()
+  rows = [{"env_steps": 1000 * i, "train/episode_return": -5.0 + i, "train/episode_cost": 10.0 - i,
+           "eval/task_return": -4.0 + i, "eval/episode_cost": 9.0 - i, "eval/completion": 0.1 * i,
+           "eval/safe_completion": 0.05 * i, "lagrange": 0.2 * i} for i in range(5)]
+  (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+  (run / "config.json").write_text(json.dumps({"task": "place_plate", "config": {"budget": 5.0}}))
+  got_rows, budget, task = plots.read_training_log(str(run))
+  assert got_rows == rows and budget == 5.0 and task == "place_plate"
+  p = plots.plot_training_log(str(run), str(tmp_path / "curves.png"))
+  assert imageio.imread(p).shape[1] > 4 * 400  # four panels: return, cost, success, λ
+  with pytest.raises(ValueError, match="training_log"):
+    plots.find_training_log(str(tmp_path / "nowhere"))
+
+
+# --- CLI ------------------------------------------------------------------------------------
+def test_cli_writes_gif_and_plots(drop, tmp_path, capsys):
+  out = tmp_path / "cli.gif"
+  rc = R.main(["--task", "drop", "--policy", "zero", "--out", str(out), "--steps", "2", "--seed", str(SEED),
+               "--num-envs", str(NUM_ENVS), "--width", "96", "--height", "64", "--plots", str(tmp_path / "p")])
+  assert rc == 0
+  assert len(imageio.mimread(str(out))) == 3
+  assert os.path.exists(tmp_path / f"cli_env{NUM_ENVS - 1}.gif")
+  assert sorted(os.listdir(tmp_path / "p")) == ["cost.png", "health.png", "load.png", "rollout.png"]
+  assert "final health: plate" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--task", "nope", "--policy", "zero", "--out", "x.mp4"], "unknown task 'nope'"),
+    (["--task", "drop", "--policy", "greedy", "--out", "x.mp4"], "unknown policy 'greedy'"),
+    (["--task", "drop", "--policy", "checkpoint:/no/such/run", "--out", "x.mp4"], "does not exist"),
+    (["--task", "drop", "--policy", "zero", "--out", "x.avi"], "unsupported extension '.avi'"),
+    (["--task", "drop", "--policy", "zero", "--out", "x"], "unsupported extension"),
+    (["--task", "drop", "--policy", "zero", "--out", "x.gif", "--steps", "0"], "steps: must be a positive"),
+    (["--task", "drop", "--policy", "zero", "--out", "x.gif", "--width", "-3"], "width: must be a positive"),
+    (["--task", "drop", "--policy", "zero", "--out", "x.gif", "--camera", "top"], "camera: unknown camera 'top'"),
+    (["--task", "drop", "--policy", "zero", "--out", "x.gif", "--training-log", "/no/run"], "needs --plots"),
+])
+def test_cli_rejects_bad_arguments(args, message, capsys):
+  with pytest.raises(SystemExit) as e:
+    R.main(args)
+  assert e.value.code == 2
+  assert message in capsys.readouterr().err
+
+
+def test_api_rejects_bad_arguments(drop):
+  env, _, _, _ = drop
+  policy = lambda s, k: s.obs[:0]  # noqa: E731 (never compiled: arguments are checked first)
+  for kw, message in [({"steps": 0}, "steps"), ({"steps": 2, "out": "a.webm"}, "unsupported extension"),
+                      ({"steps": 2, "num_envs": 0}, "num_envs"), ({"steps": 2, "fps": -1}, "fps")]:
+    with pytest.raises(ValueError, match=message):
+      R.render_rollout(env, policy, **kw)
+  with pytest.raises(ValueError, match="not damage-tracked"):
+    R.render_rollout(object(), policy, steps=2)
