@@ -34,6 +34,7 @@ _REGISTRY = {
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
     "turn_on_stove": "tasks.turn_on_stove:TurnOnStove",
+    "wipe_counter": "tasks.wipe_counter:WipeCounter",
 }
 
 # Wrapper overrides: make() keyword -> (DamageWrapper keyword, default).
