@@ -597,7 +597,10 @@ def _checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
 
 
 def main(argv=None) -> int:
-  from train import evaluate as ev
+  import importlib
+
+  # train/__init__ exports a function named `evaluate`, which hides the module of that name
+  ev = importlib.import_module("train.evaluate")
 
   ap = build_parser()
   args = ap.parse_args(argv)
