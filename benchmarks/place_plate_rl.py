@@ -80,7 +80,8 @@ def parse(argv):
   p.add_argument("--eval-episodes", type=int, help="deterministic evaluation episodes per run (1024)")
   p.add_argument("--damage-weight", type=float, default=2.0)
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian run")
-  p.add_argument("--lagrange-lr", type=float, default=0.05)
+  p.add_argument("--lagrange-lr", type=float, default=0.02, help="λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max) per iteration")
+  p.add_argument("--lagrange-max", type=float, default=10.0)
   p.add_argument("--obs-mode", default="paper", help="place_plate observation: paper (6-d, fixed goal) or full")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--profile", action=argparse.BooleanOptionalAction, default=None,
@@ -217,7 +218,7 @@ def main(argv=None) -> int:
     print(f"== {name}: {spec['label']}, time limit {limit:.0f} s", flush=True)
     res = train.train(
         "place_plate", task_kwargs=task_kwargs, damage_weight=spec["damage_weight"], budget=spec["budget"],
-        lagrange_lr=args.lagrange_lr, num_envs=args.num_envs, num_timesteps=args.timesteps, seed=args.seed,
+        lagrange_lr=args.lagrange_lr, lagrange_max=args.lagrange_max, num_envs=args.num_envs, num_timesteps=args.timesteps, seed=args.seed,
         policy_hidden_sizes=args.policy_hidden_sizes, value_hidden_sizes=args.value_hidden_sizes,
         learning_rate=args.learning_rate, entropy_cost=args.entropy_cost, discounting=args.discounting,
         unroll_length=args.unroll_length, num_minibatches=args.num_minibatches, batch_size=args.batch_size,
@@ -238,7 +239,7 @@ def main(argv=None) -> int:
         "overall_steps_per_s": res.env_steps / res.wall_time, "time_to_80_safe_s": t80,
         "env_steps_to_80_safe": s80, "final_lambda": float(res.train_state.lagrange),
         "timings": res.timings, "stopped_by_time_limit": res.stopped_early,
-        "curves": curves, "history": res.history,
+        "curves": os.path.relpath(curves, ROOT), "history": res.history,
     }
     t = res.timings
     if "profile/iteration" in t:
