@@ -218,3 +218,24 @@ def test_api_rejects_bad_arguments(drop):
       R.render_rollout(env, policy, **kw)
   with pytest.raises(ValueError, match="not damage-tracked"):
     R.render_rollout(object(), policy, steps=2)
+
+
+# --- the task suite's scripted strategies (two Place Plate compiles: slow) --------------------
+@pytest.mark.slow
+def test_place_plate_unsafe_reddens_plate_safe_does_not(gl):
+  import tasks
+  from train.evaluate import make_policy
+
+  env = tasks.make("place_plate")
+  model = R.mj_model_of(env)
+  steps = tasks.default_config("place_plate")["episode_length"]
+  out = {}
+  for style in ("unsafe", "safe"):
+    res = R.render_rollout(env, make_policy(f"scripted:{style}", env), steps=steps, seed=0, width=W, height=H)
+    traj = res.trajectory
+    seg = R.render_frames(model, traj, width=W, height=H, segmentation=True)
+    m0, m1 = entity_pixels(seg[0], traj, "plate"), entity_pixels(seg[-1], traj, "plate")
+    out[style] = (traj.entity_health[-1, 0], redness(res.frames[0][0][m0]), redness(res.frames[0][-1][m1]))
+  (h_u, r0_u, r1_u), (h_s, r0_s, r1_s) = out["unsafe"], out["safe"]
+  assert h_u[0] < 90 and r1_u > r0_u + 15, out
+  assert np.all(h_s == 100.0) and abs(r1_s - r0_s) < 5, out
