@@ -280,25 +280,30 @@ def spawn(binding, rng, d) -> LiquidState:
   return _spawn_points(lm, rng, d.xpos[lm.spawn_body], d.xmat[lm.spawn_body].reshape(3, 3))
 
 
-def _pair_push(lm: LiquidModel, p: jax.Array) -> jax.Array:
-  """Jacobi position correction pushing overlapping particles apart, f32[P, 3] m.
+def _pairs(lm: LiquidModel, p: jax.Array):
+  """Neighbour geometry of all particle pairs at the predicted positions (one O(P²) pass).
 
-  Capped at r/4 per particle per substep so a dense pile can never shove a
-  particle through a thin wall in one step.
+  Returns:
+    push: f32[P, 3] m, Jacobi correction pushing overlapping pairs apart, capped
+      at r/4 per particle per substep so a dense pile can never shove a particle
+      through a thin wall in one step;
+    near: bool[P, P] pairs touching (within 2.2 r: a 10 % skin so resting neighbours count);
+    nrm: f32[P, P, 3] unit vectors from j to i (0 where not near).
   """
   diff = p[:, None, :] - p[None, :, :]  # [P, P, 3]
   d2 = jnp.sum(diff * diff, axis=-1)
   two_r = 2.0 * lm.radius
-  close = (d2 < two_r * two_r) & ~jnp.eye(p.shape[0], dtype=bool)
-  dist = jnp.sqrt(jnp.where(close, d2, 1.0))
-  overlap = jnp.where(close, two_r - dist, 0.0)
-  push = 0.5 * lm.pair_stiffness * jnp.sum((overlap / jnp.maximum(dist, 1e-6))[..., None] * diff, axis=1)
+  skin = 1.1 * two_r
+  near = (d2 < skin * skin) & ~jnp.eye(p.shape[0], dtype=bool)
+  dist = jnp.sqrt(jnp.where(near, d2, 1.0))
+  nrm = jnp.where(near[..., None], diff / jnp.maximum(dist, 1e-6)[..., None], 0.0)
+  overlap = jnp.maximum(two_r - dist, 0.0) * near
+  push = 0.5 * lm.pair_stiffness * jnp.einsum("ij,ijk->ik", overlap, nrm)
   n = jnp.linalg.norm(push, axis=-1, keepdims=True)
-  cap = 0.25 * lm.radius
-  return push * jnp.minimum(1.0, cap / jnp.maximum(n, 1e-12))
+  return push * jnp.minimum(1.0, 0.25 * lm.radius / jnp.maximum(n, 1e-12)), near, nrm
 
 
-def _pair_damp(lm: LiquidModel, p: jax.Array, v: jax.Array) -> jax.Array:
+def _pair_damp(near: jax.Array, nrm: jax.Array, v: jax.Array) -> jax.Array:
   """Velocity change removing relative normal motion of touching pairs, f32[P, 3] m/s.
 
   Position pushes turned into velocity (v = Δp/dt) would bounce a settling
@@ -306,22 +311,17 @@ def _pair_damp(lm: LiquidModel, p: jax.Array, v: jax.Array) -> jax.Array:
   over each particle's neighbours so the Jacobi update never overshoots) only
   removes energy, which is what lets a glass of liquid come to rest.
   """
-  diff = p[:, None, :] - p[None, :, :]
-  d2 = jnp.sum(diff * diff, axis=-1)
-  reach = 2.2 * lm.radius  # touching, with a 10 % skin so resting neighbours count
-  near = (d2 < reach * reach) & ~jnp.eye(p.shape[0], dtype=bool)
-  nrm = diff / jnp.sqrt(jnp.where(near, d2, 1.0))[..., None]
-  vn = jnp.sum((v[:, None, :] - v[None, :, :]) * nrm, axis=-1)  # [P, P], > 0 separating
+  vn = jnp.einsum("ik,ijk->ij", v, nrm) - jnp.einsum("jk,ijk->ij", v, nrm)  # [P, P], > 0 separating
   count = jnp.maximum(jnp.sum(near, axis=1, keepdims=True), 1).astype(v.dtype)
-  return -0.5 * jnp.sum(jnp.where(near, vn, 0.0)[..., None] * nrm, axis=1) / count
+  return -0.5 * jnp.einsum("ij,ijk->ik", vn, nrm) / count
 
 
-def _surface_velocity(lm: LiquidModel, d, p: jax.Array) -> jax.Array:
-  """f32[P, G, 3] velocity of each collidable geom's material at each particle, m/s."""
-  cvel = d.cvel[lm.column_body]  # [G, 6] (angular, linear at the root subtree COM)
-  origin = d.subtree_com[lm.column_root]  # [G, 3]
-  w, v0 = cvel[:, :3], cvel[:, 3:]
-  return v0[None] + jnp.cross(w[None], p[:, None, :] - origin[None])
+def _surface_velocity(lm: LiquidModel, d, col: jax.Array, p: jax.Array) -> jax.Array:
+  """f32[P, 3] velocity of geom column ``col[i]``'s material at particle i, m/s."""
+  body = jnp.asarray(lm.column_body)[col]
+  cvel = d.cvel[body]  # [P, 6] (angular, linear at the root subtree COM)
+  origin = d.subtree_com[jnp.asarray(lm.column_root)[col]]
+  return cvel[:, 3:] + jnp.cross(cvel[:, :3], p - origin)
 
 
 def advance(m, binding, d, ds, dt):
@@ -338,8 +338,10 @@ def advance(m, binding, d, ds, dt):
   g = jnp.asarray(m.opt.gravity, jnp.float32)
   v = (st.vel + g * dt) / (1.0 + lm.damping * dt)
   p = p0 + v * dt
-  if lm.pair_stiffness > 0 and lm.num_particles > 1:
-    p = p + _pair_push(lm, p)
+  pairs = lm.pair_stiffness > 0 and lm.num_particles > 1
+  if pairs:
+    push, near, nrm = _pairs(lm, p)
+    p = p + push
   ncol = lm.column_geom.size
   if ncol:
     for _ in range(lm.iterations):  # static: a few projection passes
@@ -348,14 +350,14 @@ def advance(m, binding, d, ds, dt):
       p = p + jnp.sum(pen[..., None] * n, axis=1)
     phi = phi + pen  # after the last push (exact for the geom pushed along its own normal)
   v = (p - p0) / dt
-  if lm.pair_stiffness > 0 and lm.num_particles > 1:
-    v = v + _pair_damp(lm, p, v)
+  if pairs:
+    v = v + _pair_damp(near, nrm, v)
   if ncol:
     # friction and no approach against the closest geom, in that geom's moving frame
     j = jnp.argmin(phi, axis=1)  # [P]
     gap = jnp.take_along_axis(phi, j[:, None], 1)[:, 0] - r
     nj = jnp.take_along_axis(n, j[:, None, None], 1)[:, 0]  # [P, 3]
-    vg = jnp.take_along_axis(_surface_velocity(lm, d, p), j[:, None, None], 1)[:, 0]
+    vg = _surface_velocity(lm, d, j, p)
     rel = v - vg
     vn = jnp.sum(rel * nj, axis=-1, keepdims=True)
     vt = rel - vn * nj

@@ -42,7 +42,10 @@ def scene():
   def control_step(d, ds, ctrl):
     return physics.step(mx, b, d.replace(ctrl=ctrl), ds, SUBSTEPS)
 
-  return m, mx, b, control_step
+  # fresh state built under jit: eagerly built mjx.Data differs from jit outputs in
+  # ways that would make control_step compile a second time on its own output
+  fresh = jax.jit(lambda key: (mjx.make_data(mx), physics.init_state(b, rng=key)))
+  return m, mx, b, control_step, fresh
 
 
 def in_glass(d, pos) -> np.ndarray:
@@ -67,9 +70,8 @@ def min_sdf(b, mx, d, pos) -> float:
 @pytest.fixture(scope="module")
 def upright_then_tilted(scene):
   """10 s upright (checked every second), then 3 s tilting to 120°."""
-  m, mx, b, control_step = scene
-  d = mjx.make_data(mx)
-  ds = physics.init_state(b, rng=jax.random.PRNGKey(1))
+  m, mx, b, control_step, fresh = scene
+  d, ds = fresh(jax.random.PRNGKey(1))
   upright = []
   for i in range(100):
     d, ds = control_step(d, ds, jnp.zeros(1))
@@ -103,9 +105,8 @@ def test_tilting_120_degrees_empties_the_glass(upright_then_tilted):
 
 
 def test_pouring_on_laptop_wets_and_damages_it(scene):
-  m, mx, b, control_step = scene
-  d = mjx.make_data(mx)
-  ds = physics.init_state(b)
+  m, mx, b, control_step, fresh = scene
+  d, ds = fresh(jax.random.PRNGKey(0))
   # a column 4×4×4 on a 2r lattice, 0.1 m above the laptop's top face (z = 0.04)
   g = (np.arange(4) - 1.5) * 2 * R
   col = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) + [0.4, 0.0, 0.14 + 1.5 * 2 * R]
@@ -122,7 +123,7 @@ def test_pouring_on_laptop_wets_and_damages_it(scene):
 
 
 def test_exposure_counts_particles_within_contact_distance(scene):
-  m, mx, b, _ = scene
+  m, mx, b, _, _ = scene
   d = jax.jit(mjx.forward)(mx, mjx.make_data(mx))
   top = 0.02 + 0.01  # laptop top face, m
   on = np.stack([np.linspace(0.3, 0.5, 30), np.zeros(30), np.full(30, top + R)], -1)  # resting on it
@@ -136,7 +137,7 @@ def test_exposure_counts_particles_within_contact_distance(scene):
 
 def test_count_conserved_and_finite_over_1e4_steps(scene):
   """10⁴ substeps of the liquid alone against the glass held at 120°: P finite particles, none in a solid."""
-  m, mx, b, _ = scene
+  m, mx, b, _, _ = scene
   d = jax.jit(mjx.forward)(mx, tilt_data(mx, TILT))
   ds = physics.init_state(b, rng=jax.random.PRNGKey(2))
   dt = float(m.opt.timestep)
@@ -161,9 +162,8 @@ def test_count_conserved_and_finite_over_1e4_steps(scene):
 @pytest.mark.slow
 def test_count_conserved_full_physics_1e4_steps(scene):
   """10⁴ substeps of the full damage step while the glass swings back and forth."""
-  m, mx, b, control_step = scene
-  d = mjx.make_data(mx)
-  ds = physics.init_state(b)
+  m, mx, b, control_step, fresh = scene
+  d, ds = fresh(jax.random.PRNGKey(0))
   for i in range(10_000 // SUBSTEPS):
     d, ds = control_step(d, ds, jnp.array([TILT * (i // 50 % 2)]))
     pos = np.asarray(ds.liquid.pos)
@@ -243,7 +243,7 @@ def test_no_liquid_config_is_zero_cost():
 
 
 def test_spawn_follows_the_body(scene):
-  m, mx, b, _ = scene
+  m, mx, b, _, _ = scene
   d = jax.jit(mjx.forward)(mx, tilt_data(mx, 0.5))
   st = Lq.spawn(b, jax.random.PRNGKey(0), d)
   assert np.all(in_glass(d, st.pos)) and np.all(np.asarray(st.vel) == 0.0)

@@ -50,15 +50,17 @@ def scene():
     ds = T.set_source(ds, "burner", on, binding=b)  # switching works inside jit
     return physics.step(mx, b, d.replace(ctrl=ctrl), ds, SUBSTEPS)
 
-  return m, mx, b, control_step
+  # fresh state built under jit: eagerly built mjx.Data differs from jit outputs in
+  # ways that would make control_step compile a second time on its own output
+  fresh = jax.jit(lambda: (mjx.make_data(mx), physics.init_state(b)))
+  return m, mx, b, control_step, fresh
 
 
 @pytest.fixture(scope="module")
 def trajectory(scene):
   """Press on the lit burner 1.5 s, keep pressing with it off 1 s, then lift away 3 s."""
-  m, mx, b, control_step = scene
-  d = mjx.make_data(mx)
-  ds = physics.init_state(b)
+  m, mx, b, control_step, fresh = scene
+  d, ds = fresh()
   rows = [("start", np.asarray(ds.temperature), np.asarray(ds.link_health), np.zeros(3))]
   phases = [("press", PRESS, 1.0, 15), ("off", PRESS, 0.0, 10), ("away", AWAY, 1.0, 30)]
   for name, ctrl, on, n in phases:
@@ -74,7 +76,7 @@ def trajectory(scene):
 
 
 def test_starts_at_ambient(scene):
-  _, _, b, _ = scene
+  _, _, b, _, _ = scene
   np.testing.assert_array_equal(np.asarray(physics.init_state(b).temperature), AMBIENT)
 
 
@@ -130,7 +132,7 @@ def test_link_touching_nothing_stays_at_ambient(trajectory):
 
 
 def test_touching_matrix_from_contacts(scene):
-  m, mx, b, _ = scene
+  m, mx, b, _, _ = scene
   d = mjx.make_data(mx)
   apart = jax.jit(mjx.forward)(mx, d)
   pressed = jax.jit(mjx.forward)(mx, d.replace(qpos=jnp.array([0.0, -0.181])))  # 1 mm into the burner
@@ -149,7 +151,7 @@ def test_euler_bound_rejected_in_build():
 
 def test_euler_bound_keeps_temperature_between_ambient_and_source(scene):
   """At the largest admissible rate T approaches 300 °C without overshoot; past the bound it rings."""
-  m, mx, _, _ = scene
+  m, mx, _, _, _ = scene
   dt = float(m.opt.timestep)
   b = M.bind(m, config(conduction=1.0 / dt - 0.2 - 0.5 - 1e-3))
   d = jax.jit(mjx.forward)(mx, mjx.make_data(mx).replace(qpos=jnp.array([0.0, -0.181])))
@@ -215,7 +217,7 @@ def test_no_temperature_config_is_zero_cost():
 
 
 def test_set_source_by_index_and_name(scene):
-  _, _, b, _ = scene
+  _, _, b, _, _ = scene
   ds = physics.init_state(b)
   off = T.set_source(ds, 0, False)
   assert float(off.thermal.source_on[0]) == 0.0
