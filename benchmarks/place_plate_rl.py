@@ -41,12 +41,16 @@ os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cach
 RUNS = ("penalty", "lagrangian", "task_only")  # headline first: a timeout hurts the last run only
 
 # GPU defaults. Throughput levers: many envs, short unrolls, few big minibatches,
-# few SGD epochs (the update is a fixed cost per iteration, the rollout scales
-# with envs), and evaluation only every few million steps.
-GPU = dict(num_envs=4096, unroll_length=10, num_minibatches=8, batch_size=1024, num_updates_per_batch=4,
-           policy_hidden_sizes=(256, 256), value_hidden_sizes=(256, 256), learning_rate=5e-4,
-           entropy_cost=1e-2, discounting=0.97, timesteps=200_000_000, eval_every=4_000_000,
-           eval_episodes=1024, budget_seconds=150.0)
+# few SGD epochs, and evaluation only every few million steps.
+# An MJX step of this small scene (16 KB of state per env) is latency-bound on a GPU: its
+# time barely grows with the batch up to tens of thousands of envs (the drop scene on an
+# H100: 26 k env-steps/s at 1024 envs, 115 k at 8192, 400 k at 32768 —
+# damage_overhead_gpu.json). So more envs = more data per iteration at about the same
+# iteration rate, hence 16384 envs.
+GPU = dict(num_envs=16384, unroll_length=10, num_minibatches=8, batch_size=2048, num_updates_per_batch=4,
+           policy_hidden_sizes=(256, 256), value_hidden_sizes=(256, 256), learning_rate=1e-3,
+           entropy_cost=1e-2, discounting=0.97, timesteps=500_000_000, eval_every=2_500_000,
+           eval_episodes=1024, budget_seconds=170.0)
 # CPU quick mode: the same code path at toy size (this machine: a few hundred env-steps/s).
 QUICK = dict(num_envs=32, unroll_length=10, num_minibatches=4, batch_size=16, num_updates_per_batch=2,
              policy_hidden_sizes=(64, 64), value_hidden_sizes=(64, 64), learning_rate=5e-4,
@@ -83,6 +87,8 @@ def parse(argv):
   p.add_argument("--lagrange-lr", type=float, default=0.02, help="λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max) per iteration")
   p.add_argument("--lagrange-max", type=float, default=10.0)
   p.add_argument("--obs-mode", default="paper", help="place_plate observation: paper (6-d, fixed goal) or full")
+  p.add_argument("--task", default="place_plate",
+                 help="another task or env class path (e.g. train.experiments.pusher:PusherEnv for a CPU learning check)")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--profile", action=argparse.BooleanOptionalAction, default=None,
                  help="time rollout vs update (one extra compile; default: on for GPU, off for --quick)")
@@ -126,11 +132,11 @@ def write_results(path_base, payload):
   with open(path_base + ".json", "w") as f:
     json.dump(payload, f, indent=1)
   lines = [
-      f"# Place Plate from scratch: PPO task-only vs damage penalty vs PPO-Lagrangian ({payload['device']})",
+      f"# {payload['task']} from scratch: PPO task-only vs damage penalty vs PPO-Lagrangian ({payload['device']})",
       "",
       f"Date: {payload['date']}. Command: `{payload['command']}`",
       "",
-      f"Task `place_plate` (obs_mode={payload['obs_mode']}), episode length {payload['episode_length']}; "
+      f"Task `{payload['task']}` (obs_mode={payload['obs_mode']}), episode length {payload['episode_length']}; "
       f"each run evaluated on {payload['eval_episodes']} episodes of its deterministic policy. "
       "Safe completion = completed and every tracked entity's final health > 95 (DAMAGE_MODEL.md §7).",
       "",
@@ -183,16 +189,17 @@ def main(argv=None) -> int:
 
   slug, device = device_info()
   os.makedirs(args.results_dir, exist_ok=True)
-  base = os.path.join(args.results_dir, f"rl_place_plate_{slug}")
-  work = args.work_dir or os.path.join("/tmp", f"rl_place_plate_{slug}")
-  task_kwargs = {"obs_mode": args.obs_mode}
-  episode_length = ppo.task_episode_length(ppo.resolve_task("place_plate", task_kwargs)[0])
+  task_slug = args.task.rsplit(":", 1)[-1].lower() if ":" in args.task else args.task
+  base = os.path.join(args.results_dir, f"rl_{task_slug}_{slug}")
+  work = args.work_dir or os.path.join("/tmp", f"rl_{task_slug}_{slug}")
+  task_kwargs = {"obs_mode": args.obs_mode} if args.task == "place_plate" else None
+  episode_length = ppo.task_episode_length(ppo.resolve_task(args.task, task_kwargs)[0])
   settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
               if k not in ("results_dir", "work_dir", "runs")}
   payload = {
       "device": device, "date": time.strftime("%Y-%m-%d %H:%M"), "jax": jax.__version__,
       "command": " ".join(shlex.quote(a) for a in [os.path.relpath(sys.argv[0], ROOT)] + list(sys.argv[1:] if argv is None else argv)),
-      "obs_mode": args.obs_mode, "episode_length": episode_length, "eval_episodes": args.eval_episodes,
+      "task": args.task, "obs_mode": args.obs_mode if task_kwargs else None, "episode_length": episode_length, "eval_episodes": args.eval_episodes,
       "settings": settings, "runs": {}, "notes": [],
   }
   if args.quick:
@@ -217,7 +224,7 @@ def main(argv=None) -> int:
         break
     print(f"== {name}: {spec['label']}, time limit {limit:.0f} s", flush=True)
     res = train.train(
-        "place_plate", task_kwargs=task_kwargs, damage_weight=spec["damage_weight"], budget=spec["budget"],
+        args.task, task_kwargs=task_kwargs, damage_weight=spec["damage_weight"], budget=spec["budget"],
         lagrange_lr=args.lagrange_lr, lagrange_max=args.lagrange_max, num_envs=args.num_envs, num_timesteps=args.timesteps, seed=args.seed,
         policy_hidden_sizes=args.policy_hidden_sizes, value_hidden_sizes=args.value_hidden_sizes,
         learning_rate=args.learning_rate, entropy_cost=args.entropy_cost, discounting=args.discounting,

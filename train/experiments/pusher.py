@@ -40,7 +40,7 @@ CONFIG = {"entities": {"vase": {"params": "vase", "bodies": ["vase"]}}}
 
 
 class PusherEnv(DamageEnv):
-  """obs = [x, ẋ, goal − x] (3), action = [force] (1) in [−1, 1].
+  """obs = [x, ẋ, goal − x] (3), action = [force] (1) in [−1, 1]; episodes of 50 steps (2 s).
 
   Args:
     goal: target x of the pusher's centre, m (contact with the vase at 0.5).
@@ -54,6 +54,7 @@ class PusherEnv(DamageEnv):
     mj_model = mujoco.MjModel.from_xml_string(_XML.format(vase_x=vase_x, gear=gear))
     super().__init__(mj_model, CONFIG, n_substeps)
     self.goal, self.start, self.tol = float(goal), (float(start[0]), float(start[1])), float(tol)
+    self.episode_length = 50  # the trainer's default episode length for this env
 
   @property
   def observation_size(self) -> int:
