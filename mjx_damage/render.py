@@ -59,9 +59,13 @@ MAX_HEALTH = 100.0
 # Headless OpenGL
 # --------------------------------------------------------------------------------------
 def gl_backend() -> str:
-  """The OpenGL backend to render with: ``$MUJOCO_GL`` when it names a headless one, else OSMesa."""
-  name = os.environ.get("MUJOCO_GL", "").strip().lower()
-  return name if name in GL_BACKENDS else DEFAULT_GL
+  """The headless OpenGL backend to render with: ``$MUJOCO_GL``, else ``$PYOPENGL_PLATFORM``
+  when one names ``osmesa`` or ``egl``, else OSMesa."""
+  for var in ("MUJOCO_GL", "PYOPENGL_PLATFORM"):
+    name = os.environ.get(var, "").strip().lower()
+    if name in GL_BACKENDS:
+      return name
+  return DEFAULT_GL
 
 
 def ensure_gl() -> str:
@@ -78,7 +82,10 @@ def ensure_gl() -> str:
       names the Debian package to install).
   """
   backend = gl_backend()
-  os.environ.setdefault("PYOPENGL_PLATFORM", backend)  # PyOpenGL reads this on first import
+  platform = os.environ.setdefault("PYOPENGL_PLATFORM", backend)  # PyOpenGL reads it on first import
+  if platform.strip().lower() != backend:
+    raise RuntimeError(f"headless rendering: MUJOCO_GL={backend} but PYOPENGL_PLATFORM={platform}; "
+                       "set both to the same backend (osmesa or egl), or unset PYOPENGL_PLATFORM")
   try:
     if backend == "osmesa":
       from mujoco.osmesa import GLContext
