@@ -10,7 +10,9 @@ From a :class:`mjx_damage.render.Trajectory` (``render_rollout(...).trajectory``
 * load — the peak contact loads F∥ and F⊥ of each control step on the most
   damaged link (lowest final health; the most loaded one if none is damaged),
   with its mechanical stress ε = α·F∥ + β·F⊥ against the threshold E: damage
-  accrues where ε > E (DAMAGE_MODEL.md §2);
+  accrues where ε > E (DAMAGE_MODEL.md §2). ε is formed from the step's peak
+  F∥ and F⊥, which may come from different substeps, so it bounds the step's
+  peak stress from above;
 * cost — damage per step (bars) and cumulative episode cost.
 
 From a training run's ``metrics.jsonl``: :func:`plot_training_log` (return and
@@ -82,7 +84,8 @@ def _load_ax(ax, traj, b):
 
 def _cost_ax(ax, traj, b):
   t = traj.time
-  ax.bar(t, traj.cost[:, b], width=traj.dt, color="C3", label="cost per step")
+  # step k's damage happened during (t_k − dt, t_k]: draw its bar over that interval
+  ax.bar(t, traj.cost[:, b], width=-traj.dt, align="edge", color="C3", label="cost per step")
   ax.set_xlabel("time (s)")
   ax.set_ylabel("damage per step (health points)")
   ax.set_title("cost")

@@ -38,10 +38,12 @@ MP4 (imageio-ffmpeg, H.264) or GIF (Pillow) by the output's extension.
 from __future__ import annotations
 
 import argparse
+import collections
 import dataclasses
 import os
 import sys
 import time
+import warnings
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -287,14 +289,19 @@ class _Programs:
     self.step = jax.jit(jax.vmap(step_one, in_axes=(0, 0, 0, None)))
 
 
-_PROGRAMS: dict = {}
+_PROGRAMS: "collections.OrderedDict" = collections.OrderedDict()
+_MAX_PROGRAMS = 4  # a few (env, policy) pairs stay compiled, e.g. safe and unsafe of one task
 
 
 def _programs(env, policy, num_envs) -> _Programs:
-  # Keyed by identity; the entry keeps env and policy alive so ids are not reused.
+  # Keyed by identity; the entry keeps env and policy alive so their ids are not reused.
   key = (id(env), id(policy), num_envs)
-  if key not in _PROGRAMS:
+  if key in _PROGRAMS:
+    _PROGRAMS.move_to_end(key)
+  else:
     _PROGRAMS[key] = _Programs(env, policy, num_envs)
+    while len(_PROGRAMS) > _MAX_PROGRAMS:
+      _PROGRAMS.popitem(last=False)
   return _PROGRAMS[key]
 
 
@@ -305,9 +312,11 @@ def _positive_int(name, v):
 
 
 def _binding(env):
-  b = getattr(env, "binding", None) or getattr(env, "damage_binding", None)
+  # DamageWrapper's binding (brax wrappers around it forward the attribute); a bare
+  # DamageEnv tracks damage but lacks the health/cost summaries that frames and plots read.
+  b = getattr(env, "binding", None)
   if b is None:
-    raise ValueError("env: not damage-tracked (wrap it in mjx_damage.DamageWrapper)")
+    raise ValueError("env: not damage-tracked: wrap it in mjx_damage.DamageWrapper (tasks.make does)")
   return b
 
 
@@ -499,10 +508,14 @@ def write_video(frames: np.ndarray, out: str, fps: float) -> str:
   # imageio resize (which would blur the overlay text).
   h, w = frames.shape[1:3]
   frames = np.pad(frames, ((0, 0), (0, h % 2), (0, w % 2), (0, 0)), mode="edge")
-  with imageio.get_writer(out, format="FFMPEG", mode="I", fps=float(fps), codec="libx264",
-                          pixelformat="yuv420p", quality=8, macro_block_size=1) as writer:
-    for f in frames:
-      writer.append_data(f)
+  with warnings.catch_warnings():
+    # imageio-ffmpeg starts ffmpeg with subprocess (fork + exec at once); JAX's
+    # generic "os.fork() was called" warning does not apply to that.
+    warnings.filterwarnings("ignore", message="os.fork", category=RuntimeWarning)
+    with imageio.get_writer(out, format="FFMPEG", mode="I", fps=float(fps), codec="libx264",
+                            pixelformat="yuv420p", quality=8, macro_block_size=1) as writer:
+      for f in frames:
+        writer.append_data(f)
   return out
 
 
