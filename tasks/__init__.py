@@ -30,9 +30,11 @@ from mjx_damage.wrapper import DamageWrapper
 
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
+    "add_firewood": "tasks.add_firewood:AddFirewood",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
+    "shelve_item": "tasks.shelve_item:ShelveItem",
     "turn_on_stove": "tasks.turn_on_stove:TurnOnStove",
     "wipe_counter": "tasks.wipe_counter:WipeCounter",
 }
