@@ -595,7 +595,7 @@ def build_parser() -> argparse.ArgumentParser:
   ap.add_argument("--height", type=int, default=480)
   ap.add_argument("--camera", default=None, help="'free' (default) or a camera name of the scene")
   ap.add_argument("--fps", type=float, default=None, help="playback rate (default: real time)")
-  ap.add_argument("--plots", default=None, metavar="DIR", help="also write rollout plots (PNG) to DIR")
+  ap.add_argument("--plots", default=None, metavar="DIR", help="also write rollout plots (PNG, env 0) to DIR")
   ap.add_argument("--training-log", default=None, metavar="PATH",
                   help="a training run's metrics.jsonl (or run dir): its curves go to --plots DIR too")
   return ap
