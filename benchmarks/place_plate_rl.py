@@ -246,7 +246,7 @@ def main(argv=None) -> int:
         "overall_steps_per_s": res.env_steps / res.wall_time, "time_to_80_safe_s": t80,
         "env_steps_to_80_safe": s80, "final_lambda": float(res.train_state.lagrange),
         "timings": res.timings, "stopped_by_time_limit": res.stopped_early,
-        "curves": os.path.relpath(curves, ROOT), "history": res.history,
+        "curves": os.path.basename(curves), "history": res.history,
     }
     t = res.timings
     if "profile/iteration" in t:

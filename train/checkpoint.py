@@ -23,6 +23,7 @@ import os
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 FILENAME = "checkpoint.npz"
@@ -34,7 +35,8 @@ def save(path: str, state: Any, policy: Any, meta: dict) -> None:
   for prefix, tree in (("s", state), ("p", policy)):
     for i, leaf in enumerate(jax.device_get(jax.tree.leaves(tree))):
       arrays[f"{prefix}{i}"] = np.asarray(leaf)
-  arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+  # default=repr: task overrides may hold callables (params_fn); record, don't fail.
+  arrays["meta"] = np.frombuffer(json.dumps(meta, default=repr).encode(), dtype=np.uint8)
   tmp = path + ".tmp"
   with open(tmp, "wb") as f:
     np.savez(f, **arrays)
@@ -69,5 +71,19 @@ def restore(path: str, template: Any, which: str = "state") -> Any:
   for i, (a, t) in enumerate(zip(leaves, t_leaves)):
     if tuple(a.shape) != tuple(t.shape):
       raise ValueError(f"checkpoint: {path} {which} array {i} has shape {a.shape}, this config needs {t.shape}")
-    out.append(a.astype(t.dtype))
+    out.append(_like(a, t))
   return jax.tree.unflatten(treedef, out)
+
+
+def _like(a: np.ndarray, t):
+  """``a`` as the template leaf's dtype, weakly typed where the template is.
+
+  A weak-typed scalar (brax's normaliser ``std_eps`` is a Python float) comes
+  back as a strong one from numpy; the jitted iteration would then see a new
+  input signature and compile a second time. A Python scalar keeps it weak.
+  """
+  if getattr(t, "weak_type", False) and a.ndim == 0:
+    w = jnp.asarray(a.item())
+    if w.dtype == t.dtype:
+      return w
+  return a.astype(t.dtype)

@@ -43,6 +43,7 @@ import functools
 import json
 import math
 import os
+import sys
 import time
 from typing import Any, Callable, Optional, Sequence
 
@@ -353,8 +354,7 @@ class Trainer:
       raise ValueError("task: the env has no actions to learn")
     self.network = make_networks(self.obs_size, self.action_size, cfg)
     self.make_policy = ppo_networks.make_inference_fn(self.network)
-    opt = optax.adam(cfg.learning_rate)
-    self.optimizer = opt if cfg.max_grad_norm is None else optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), opt)
+    self.optimizer = make_optimizer(cfg)
     loss_fn = functools.partial(
         ppo_losses.compute_ppo_loss,
         ppo_network=self.network,
@@ -538,6 +538,26 @@ class Trainer:
     """
     return rollout_episodes(self.eval_env, self.safe_threshold, self.cfg.episode_length,
                             policy_apply, policy_params, key, num_episodes)
+
+
+def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
+  """Adam, with the gradient norm clipped per network (policy and value apart).
+
+  Why apart: damage costs make rare, very large rewards (one drop can cost
+  hundreds of health points in a step), so the value loss's gradient can be
+  orders of magnitude larger than the policy's. One global-norm clip over both
+  would then shrink the policy's step to nothing whenever the critic is
+  surprised; clipping each network by its own norm keeps the policy learning.
+  """
+  def one():
+    adam = optax.adam(cfg.learning_rate)
+    return adam if cfg.max_grad_norm is None else optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), adam)
+
+  def labels(params: ppo_losses.PPONetworkParams):
+    return ppo_losses.PPONetworkParams(policy=jax.tree.map(lambda _: "policy", params.policy),
+                                       value=jax.tree.map(lambda _: "value", params.value))
+
+  return optax.multi_transform({"policy": one(), "value": one()}, labels)
 
 
 def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networks.PPONetworks:
@@ -799,11 +819,13 @@ def train(
     # Rows logged after the checkpoint were produced by the interrupted tail: redo them.
     rows = [r for r in _read_rows(out_dir) if r["iteration"] <= start_iteration]
   else:
+    if resume:
+      print(f"resume: no checkpoint in {out_dir}; starting a fresh run", file=sys.stderr)
     ts = trainer.with_shaping(jax.jit(trainer.init_state)(cfg.seed))
     start_iteration = 0
   if out_dir is not None:
     with open(os.path.join(out_dir, "config.json"), "w") as f:
-      json.dump(meta, f, indent=1)
+      json.dump(meta, f, indent=1, default=repr)
   log = _Log(out_dir, rows)
 
   # Donating the state lets XLA update the env batch in place (GPU memory).
