@@ -1,0 +1,144 @@
+"""Scripted safe vs unsafe policies on every registered task: does the damage signal tell them apart?
+
+For each task, 256 randomised episodes of each scripted policy (safe, unsafe)
+run in ONE batched, compiled call (``jit(vmap(lax.scan(step)))`` over
+2 × 256 episodes, the policy chosen per episode), and the DAMAGE_MODEL.md §7
+metrics are written to ``benchmarks/results/scripted_policies.{md,json}``:
+completion %, safe completion % (completed and every entity's final health
+> 95), average environment health, zero-damage rate %, plus the first-compile
+time of the task's batched rollout (reset + policy + step; one compilation
+serves both policies) and the time of the compiled run.
+
+Targets (issue #4): safe policy completion ≥ 95 % and safe completion ≥ 90 %;
+unsafe policy completion ≥ 80 % and safe completion ≤ 10 %.
+
+Usage::
+
+    .venv/bin/python benchmarks/scripted_policies.py [--episodes 256] [--tasks a,b] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import faulthandler
+import json
+import os
+import platform
+import signal
+import sys
+import time
+
+faulthandler.register(signal.SIGUSR1)  # `kill -USR1 <pid>` prints where a long run is
+
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+import tasks  # noqa: E402
+from tasks.rollout import rollout_fn, summarise  # noqa: E402
+
+RESULTS = os.path.join(os.path.dirname(__file__), "results")
+STYLES = ("safe", "unsafe")
+COMMAND = ""
+
+
+def meets_target(style: str, row: dict) -> bool:
+  if style == "safe":
+    return row["completion_pct"] >= 95.0 and row["safe_completion_pct"] >= 90.0
+  return row["completion_pct"] >= 80.0 and row["safe_completion_pct"] <= 10.0
+
+
+def run_task(name: str, episodes: int, seed: int) -> list[dict]:
+  env = tasks.make(name)
+  length = env.unwrapped.episode_length
+  run = rollout_fn(env, [tasks.scripted_policy(env, s) for s in STYLES], length)
+  rngs = jax.random.split(jax.random.PRNGKey(seed), len(STYLES) * episodes)
+  which = jnp.repeat(jnp.arange(len(STYLES)), episodes)
+  t0 = time.time()
+  compiled = run.lower(rngs, which).compile()
+  t_compile = time.time() - t0
+  t0 = time.time()
+  stats = jax.block_until_ready(compiled(rngs, which))
+  t_run = time.time() - t0
+  rows = []
+  for i, style in enumerate(STYLES):
+    sub = jax.tree.map(lambda x: x[i * episodes : (i + 1) * episodes], stats)
+    row = {"task": name, "policy": style, "episode_length": length, "entities": list(env.entity_names)}
+    row.update(summarise(sub))
+    row["first_compile_s"] = round(t_compile, 1)
+    row["run_s"] = round(t_run, 1)
+    row["meets_target"] = meets_target(style, row)
+    row["command"] = COMMAND
+    rows.append(row)
+    print(json.dumps(row), flush=True)
+  return rows
+
+
+def write(rows: list[dict], command: str) -> None:
+  """Write the table; rows of tasks not in this run are kept from the existing JSON (each row names its command)."""
+  os.makedirs(RESULTS, exist_ok=True)
+  path = os.path.join(RESULTS, "scripted_policies.json")
+  done = {r["task"] for r in rows}
+  if os.path.exists(path):
+    with open(path) as f:
+      old = json.load(f).get("rows", [])
+    rows = [r for r in old if r["task"] not in done] + rows
+  order = {n: i for i, n in enumerate(tasks.names())}
+  rows = sorted(rows, key=lambda r: (order.get(r["task"], 99), STYLES.index(r["policy"])))
+  meta = {
+      "command": command,
+      "jax": jax.__version__, "backend": jax.default_backend(), "machine": platform.processor() or platform.machine(),
+      "cpu_count": os.cpu_count(),
+      "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+  }
+  with open(os.path.join(RESULTS, "scripted_policies.json"), "w") as f:
+    json.dump({"meta": meta, "rows": rows}, f, indent=1)
+  lines = [
+      "# Scripted safe vs unsafe policies (DAMAGE_MODEL.md §7 metrics)",
+      "",
+      f"Command (latest run; each JSON row records the command that produced it): `{command}`  ",
+      f"jax {meta['jax']} on {meta['backend']} ({meta['cpu_count']} CPU cores, shared), {meta['date']}.",
+      "Per task: one compiled `jit(vmap(scan))` call runs all episodes of both policies; first-compile time "
+      "is that call's compilation (reset + policy + step with damage at every substep).",
+      "Targets: safe completion ≥ 95 % and safe-completion ≥ 90 %; unsafe completion ≥ 80 % and safe-completion ≤ 10 %.",
+      "",
+      "| task | policy | episodes | completion % | safe completion % | avg env health | zero-damage % | mean episode cost | first compile s | run s | target |",
+      "|---|---|---|---|---|---|---|---|---|---|---|",
+  ]
+  for r in rows:
+    lines.append(
+        f"| {r['task']} | {r['policy']} | {r['episodes']} | {r['completion_pct']:.1f} | {r['safe_completion_pct']:.1f} "
+        f"| {r['avg_env_health']:.1f} | {r['zero_damage_pct']:.1f} | {r['mean_episode_cost']:.1f} "
+        f"| {r['first_compile_s']:.0f} | {r['run_s']:.0f} | {'met' if r['meets_target'] else 'MISSED'} |"
+    )
+  lines += ["", "Mean final health per entity:", ""]
+  for r in rows:
+    ents = ", ".join(f"{n} {h:.1f}" for n, h in zip(r["entities"], r["entity_health_mean"]))
+    lines.append(f"- {r['task']} / {r['policy']}: {ents}")
+  with open(os.path.join(RESULTS, "scripted_policies.md"), "w") as f:
+    f.write("\n".join(lines) + "\n")
+
+
+def main(argv=None) -> int:
+  p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+  p.add_argument("--episodes", type=int, default=256)
+  p.add_argument("--tasks", default=",".join(tasks.names()))
+  p.add_argument("--seed", type=int, default=0)
+  a = p.parse_args(argv)
+  names = [n for n in a.tasks.split(",") if n]
+  for n in names:
+    tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
+  global COMMAND
+  command = "python benchmarks/scripted_policies.py " + " ".join(argv if argv is not None else sys.argv[1:])
+  COMMAND = command.strip()
+  rows = []
+  for n in names:
+    rows += run_task(n, a.episodes, a.seed)
+    write(rows, command.strip())  # partial results survive an interrupted run
+  return 0
+
+
+if __name__ == "__main__":
+  raise SystemExit(main())
