@@ -202,9 +202,13 @@ def main(argv=None) -> int:
       "task": args.task, "obs_mode": args.obs_mode if task_kwargs else None, "episode_length": episode_length, "eval_episodes": args.eval_episodes,
       "settings": settings, "runs": {}, "notes": [],
   }
-  if args.quick:
+  if args.quick and args.task == "place_plate":
     payload["notes"].append("--quick: CPU plumbing run at toy size; the success numbers mean nothing, "
-                            "the throughput is this machine's.")
+                            "the throughput is this machine's (2 cores shared with other jobs).")
+  elif args.quick:
+    payload["notes"].append(f"--quick on {args.task}: a toy env small enough to learn on this CPU (2 cores "
+                            "shared with other jobs); it checks that the learning machinery separates the "
+                            "three objectives, nothing about Place Plate.")
   specs = {
       "task_only": dict(label="task reward only (w=0)", damage_weight=0.0, budget=None),
       "penalty": dict(label=f"damage penalty (w={args.damage_weight:g})", damage_weight=args.damage_weight, budget=None),

@@ -48,6 +48,7 @@ def plot_training(rows: Sequence[dict], path: str, title: str = "", budget: Opti
     axes[3].set_title("Lagrange multiplier λ")
   for ax in axes:
     ax.set_xlabel("env steps")
+    ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))  # 2e6, not 2000000 over its neighbours
     ax.grid(alpha=0.3)
   if title:
     fig.suptitle(title)
