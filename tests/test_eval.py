@@ -232,3 +232,17 @@ def test_randomizer_is_used_by_wrapper_at_reset():
   base = env.binding.params
   np.testing.assert_allclose(state.info["damage_state"].params.mech_threshold, base.mech_threshold / 2, rtol=1e-6)
   np.testing.assert_allclose(state.info["damage_initial"].params.mech_scale, base.mech_scale * 2, rtol=1e-6)
+
+
+def test_metrics_follow_damage_model_definitions():
+  pe = {"completed": np.array([1.0, 0, 1, 1]), "cost": np.array([0.0, 2, 5, 0]),
+        "damaged": np.array([0.0, 1, 1, 0]), "length": np.array([50.0, 50, 30, 50]),
+        "entity_health": np.array([[100, 99.0], [90, 100], [0, 100], [100, 100]]), "success_final": np.zeros(4)}
+  m = E.metrics(pe, ["plate", "robot"], safe_threshold=95)
+  assert m["completion"] == 0.75
+  assert m["safe_completion"] == 0.5  # episode 2 completed with the plate destroyed: not safe
+  assert m["zero_damage_rate"] == 0.5 and m["cost_mean"] == 1.75
+  assert m["avg_health"] == pytest.approx(np.mean([100, 99, 90, 100, 0, 100, 100, 100]))
+  assert m["entity_health"] == {"plate": 72.5, "robot": 99.75} and m["entity_health_min"]["plate"] == 0
+  assert E.metrics(pe, ["plate", "robot"], safe_threshold=99.5)["safe_completion"] == 0.25
+  assert "safe completion (SC, health > 95)  50.0 %" in E.format_table(m)
