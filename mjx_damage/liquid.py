@@ -11,9 +11,9 @@ Config (top-level key ``liquid``)::
         # ... or relative to a body at the model's reset pose:
         # body: glass, offset: [0, 0, 0.02], size: [...]
       damping: 0.5                  # 1/s, linear drag on particle velocity
-      friction: 0.1                 # in [0, 1], tangential velocity removed per substep in contact
+      friction: 0.02                # in [0, 1], share of tangential velocity removed per substep in contact (low: no angle of repose)
       contact_distance: 0.008       # m, surface gap within which a particle wets a link (default: radius)
-      pair_stiffness: 0.25          # in [0, 1], particle–particle repulsion (0 = off: no O(P²) work)
+      pair_stiffness: 0.6           # in [0, 1], particle–particle repulsion (0 = off: no O(P²) work)
       max_speed: 4.0                # m/s, speed clamp (also the tunnelling guard, see below)
       iterations: 2                 # geom projection passes per substep
       exclude: [flame_geom]         # geoms the liquid passes through (besides non-colliding ones)
@@ -62,8 +62,8 @@ MAX_PARTICLES = 4096
 DEFAULTS = {
     "radius": 0.008,
     "damping": 0.5,
-    "friction": 0.1,
-    "pair_stiffness": 0.25,
+    "friction": 0.02,
+    "pair_stiffness": 0.6,
     "max_speed": 4.0,
     "iterations": 2,
 }
