@@ -30,6 +30,14 @@ away.
 Observation: ``full`` = [proprio (8); plate pos (3); plate quat (4); plate
 lin. vel (3); goal pos (3)] = 21; ``paper`` = [grip point (3); plate pos (3)]
 (DAMAGE_MODEL.md §8).
+
+Start (``start``): ``"counter"`` — the plate rests on the counter and must be
+picked up first; ``"in_hand"`` — the paper's RL setting ("the robot begins
+holding a plate above the counter"): the plate is gripped 8–16 cm above the
+counter at x ∈ [−0.15, 0], y ∈ [−0.1, 0.1] m. Default: ``in_hand`` with
+``obs_mode="paper"``, ``counter`` otherwise. Dropping from the in-hand start
+breaks the plate, so the task-only shortcut (open the gripper over the goal)
+and the safe strategy (lower to contact, then open) both exist from step 0.
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ GOAL_CENTRE = (0.15, 0.0)
 CARRY_Z = 0.10  # m, grip-point height while carrying (safe policy)
 DROP_Z = 0.18  # m, grip-point height of the unsafe policy's carry and release (≈ 17 cm fall)
 GRASP_Z = 0.004  # m, grip-point (fingertip) height when grasping: 4 mm above the counter
+GRIP_CLOSED = float(R.gripper_command_for_gap(2 * PLATE_HALF - 0.06))  # target 3 cm inside each side: 12 N grip
 
 
 class PlacePlate(Task):
@@ -56,6 +65,16 @@ class PlacePlate(Task):
   workspace = ((-0.35, -0.3, 0.0), (0.35, 0.3, 0.3))
   default_episode_length = 100
   obs_modes = ("full", "paper")
+  starts = ("counter", "in_hand")
+
+  def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
+               success_bonus=1.0, start=None):
+    if start is None:
+      start = "in_hand" if obs_mode == "paper" else "counter"
+    if start not in self.starts:
+      raise ValueError(f"start: unknown {start!r}; valid: {', '.join(self.starts)}")
+    self.start = start
+    super().__init__(episode_length, n_substeps, obs_mode, terminate_on_success, success_bonus)
 
   def setup(self, m: mujoco.MjModel) -> None:
     self._pq, self._pv = free_joint_adr(m, "plate")
@@ -72,9 +91,16 @@ class PlacePlate(Task):
       goal_xy = jnp.asarray(GOAL_CENTRE, jnp.float32)
     else:
       goal_xy = jax.random.uniform(k[1], (2,), minval=jnp.array([0.08, -0.1]), maxval=jnp.array([0.22, 0.1]))
-    eef = jax.random.uniform(k[2], (3,), minval=jnp.array([-0.05, -0.05, 0.12]), maxval=jnp.array([0.05, 0.05, 0.18]))
-    qpos = R.Robot.home(qpos, eef)
-    qpos = qpos.at[self._pq : self._pq + 7].set(jnp.concatenate([plate_xy, jnp.array([PLATE_REST_Z, 1.0, 0, 0, 0])]))
+    if self.start == "in_hand":
+      # gripped at the plate's centre line: fingertips GRASP_Z − PLATE_REST_Z below its centre
+      plate = jax.random.uniform(k[0], (3,), minval=jnp.array([-0.15, -0.1, 0.08]), maxval=jnp.array([0.0, 0.1, 0.16]))
+      eef = plate + jnp.array([0.0, 0.0, GRASP_Z - PLATE_REST_Z])
+      qpos = R.Robot.home(qpos, eef, gripper_q=PLATE_HALF + R.FINGER_HALF_THICK)
+    else:
+      plate = jnp.concatenate([plate_xy, jnp.array([PLATE_REST_Z])])
+      eef = jax.random.uniform(k[2], (3,), minval=jnp.array([-0.05, -0.05, 0.12]), maxval=jnp.array([0.05, 0.05, 0.18]))
+      qpos = R.Robot.home(qpos, eef)
+    qpos = qpos.at[self._pq : self._pq + 7].set(jnp.concatenate([plate, jnp.array([1.0, 0, 0, 0])]))
     goal = jnp.concatenate([goal_xy, jnp.array([PLATE_REST_Z])]).astype(jnp.float32)
     return qpos, {"goal": goal}
 
@@ -82,7 +108,11 @@ class PlacePlate(Task):
     state = super().reset(rng)
     d = state.pipeline_state
     mp = d.mocap_pos.at[self._goal_mocap].set(state.info["goal"].at[2].set(0.0005))
-    return state.replace(pipeline_state=d.replace(mocap_pos=mp))
+    d = d.replace(mocap_pos=mp)
+    if self.start == "in_hand":  # servo the fingers to the squeezing grip the carry phase uses
+      q = R.Q_MIN + 0.5 * (GRIP_CLOSED + 1.0) * (R.Q_MAX - R.Q_MIN)
+      d = d.replace(ctrl=d.ctrl.at[3:5].set(q))
+    return state.replace(pipeline_state=d)
 
   def task_obs(self, d, info):
     q = d.qpos[self._pq : self._pq + 7]
@@ -120,7 +150,7 @@ class PlacePlate(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     carry_z = CARRY_Z if safe else DROP_Z
-    closed = R.gripper_command_for_gap(2 * PLATE_HALF - 0.06)  # target 3 cm inside each side: 12 N grip
+    closed = GRIP_CLOSED
     opened = 1.0
 
     def act(state, rng):
