@@ -496,6 +496,24 @@ def report_md(result: dict) -> str:
     lines += [f"Task `{t['task']}` ({t['envs']} envs, {t['n_substeps']} substeps): "
               f"{t['physics_steps_per_s']:,.0f} physics steps/s, {t['env_steps_per_s']:,.0f} env steps/s.", ""]
   lines += ["## Summary", "", "```json", json.dumps(result["summary"], indent=1), "```", ""]
+  reading = []
+  for key, sp in result["summary"].items():
+    if key.startswith("speedup_over_reference_K"):
+      k = key.rsplit("K", 1)[1]
+      reading.append(
+          f"- K={k}: MJX damage-aware at {sp['mjx_envs']} envs = {sp['ratio_vs_reference_damage']:.1f}x the "
+          f"reference-style pipeline (native MuJoCo + Python evaluators, 1 env at a time), "
+          f"{sp['ratio_vs_native_no_damage_1thread']:.2f}x native MuJoCo without damage (1 thread), "
+          f"{sp['ratio_vs_rollout_no_damage']:.2f}x mujoco.rollout without damage "
+          f"({result['reference'][k]['rollout_no_damage']['threads']} threads).")
+  if reading:
+    lines += ["## Reading the numbers", ""] + reading + [""]
+    if result["platform"] == "cpu":
+      lines += ["On a CPU the MJX (JAX) step only matches native MuJoCo by batching about a thousand "
+                "environments, and falls far behind it as the number of free bodies grows (dense per-env "
+                "linear algebra): choose native MuJoCo (`mjx_damage.native`, numpy-vectorised damage) for "
+                "CPU work and keep MJX for accelerators; the reference-style Python evaluators are the slow "
+                "path either way.", ""]
   if result.get("skipped"):
     lines += ["Skipped: " + "; ".join(json.dumps(s) for s in result["skipped"]), ""]
   return "\n".join(lines)

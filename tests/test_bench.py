@@ -98,7 +98,7 @@ def test_summary_and_plot(tmp_path):
             "vs_entities": [r for r in rows if r["envs"] == 8],
             "reference": {"4": {"reference_damage": {"env_steps_per_s": 1.0, "envs": 1, "physics_steps_per_s": 5.0},
                                 "native_no_damage": {"env_steps_per_s": 4.0, "envs": 1, "physics_steps_per_s": 20.0},
-                                "rollout_no_damage": {"env_steps_per_s": 8.0, "envs": 1, "physics_steps_per_s": 40.0}}}}
+                                "rollout_no_damage": {"env_steps_per_s": 8.0, "envs": 1, "physics_steps_per_s": 40.0, "threads": 2}}}}
   s = bench.summarize(result, 4, 8, 8)
   assert s["damage_on_off_ratio_K4_8envs"] == pytest.approx(2 / 2.1)
   assert s["entities_4_over_1_throughput_damage_on_8envs"] == pytest.approx(0.25)
