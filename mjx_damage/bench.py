@@ -534,7 +534,8 @@ def plot(result: dict, path: str) -> None:
            label=f"K={k} tracked, damage {'on' if dmg else 'off'}")
   for k, ref in result.get("reference", {}).items():
     a.axhline(ref["reference_damage"]["env_steps_per_s"], ls=":", color="gray")
-    a.annotate(f"reference-style K={k}", (1, ref["reference_damage"]["env_steps_per_s"]), fontsize=8, color="gray")
+    a.annotate(f"reference-style K={k}", (0.02, ref["reference_damage"]["env_steps_per_s"]),
+               xycoords=("axes fraction", "data"), fontsize=8, color="gray", va="bottom")
   a.set(xscale="log", yscale="log", xlabel="parallel environments", ylabel="env steps / s",
         title=f"{result['device']}: throughput vs batch")
   a.legend(fontsize=8)
