@@ -30,11 +30,13 @@ import time
 
 faulthandler.register(signal.SIGUSR1)  # `kill -USR1 <pid>` prints where a long run is
 
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
+
+# First-compile times are only meaningful without the persistent cache: switch it off here.
+jax.config.update("jax_enable_compilation_cache", False)
 
 import tasks  # noqa: E402
 from tasks.rollout import rollout_fn, summarise  # noqa: E402
@@ -131,7 +133,9 @@ def main(argv=None) -> int:
   for n in names:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
   global COMMAND
-  command = "python benchmarks/scripted_policies.py " + " ".join(argv if argv is not None else sys.argv[1:])
+  flags = os.environ.get("XLA_FLAGS")
+  command = (f"XLA_FLAGS={flags} " if flags else "") + ".venv/bin/python benchmarks/scripted_policies.py " + " ".join(
+      argv if argv is not None else sys.argv[1:])
   COMMAND = command.strip()
   rows = []
   for n in names:
