@@ -303,6 +303,18 @@ def _parse_ints(field: str, text: str) -> list[int]:
   return vals
 
 
+def save(result: dict, out: str) -> None:
+  """Write JSON, markdown and PNG for ``result`` (called after every point: a run
+  killed midway, e.g. by a hung device call, still leaves what it measured)."""
+  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+  base = os.path.splitext(out)[0]
+  with open(out, "w") as f:
+    json.dump(result, f, indent=1)
+  with open(base + ".md", "w") as f:
+    f.write(report_md(result))
+  plot(result, base + ".png")
+
+
 def run_benchmark(args) -> dict:
   import jax
 
@@ -331,6 +343,7 @@ def run_benchmark(args) -> dict:
       "vs_envs": [],
       "vs_entities": [],
       "skipped": [],
+      "complete": False,  # True once every planned point ran or was skipped
   }
   envs_cache = {}
 
@@ -340,6 +353,12 @@ def run_benchmark(args) -> dict:
     return envs_cache[k]
 
   done = {}
+
+  def checkpoint():
+    result["summary"] = summarize(result, k_main, target_n, fixed)
+    result["total_s"] = time.perf_counter() - budget.t0
+    if args.out:
+      save(result, args.out)
 
   def point(k, n, section):
     key = (k, n)
@@ -358,6 +377,7 @@ def run_benchmark(args) -> dict:
       print(f" on {on['env_steps_per_s']:>11,.1f}  off {off['env_steps_per_s']:>11,.1f} env-steps/s"
             f"  compile {on['compile_s']:.0f}/{off['compile_s']:.0f} s", flush=True)
     result[section].extend(done[key])
+    checkpoint()
 
   # Order = importance, so a spent budget drops the least important points:
   # 0. the reference pipeline (no compile, bounded by --ref-max-s per configuration);
@@ -389,6 +409,7 @@ def run_benchmark(args) -> dict:
             env.mj_model, args.substeps, q, ctrl, args.ref_steps, os.cpu_count() or 1),
     }
   result["reference"] = {str(k): v for k, v in ref.items()}
+  checkpoint()
 
   for item in first:
     point(*item)
@@ -411,8 +432,8 @@ def run_benchmark(args) -> dict:
   for item in rest:
     point(*item)
 
-  result["summary"] = summarize(result, k_main, target_n, fixed)
-  result["total_s"] = time.perf_counter() - budget.t0
+  result["complete"] = True
+  checkpoint()
   return result
 
 
@@ -599,14 +620,8 @@ def main(argv=None) -> int:
   except ValueError as e:
     ap.error(str(e))
   print(f"mjx-damage bench on {jax.devices()[0].device_kind} ({jax.device_count()} device(s))", flush=True)
-  result = run_benchmark(args)
-  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-  with open(args.out, "w") as f:
-    json.dump(result, f, indent=1)
+  result = run_benchmark(args)  # saves JSON/MD/PNG after every point and at the end
   png = os.path.splitext(args.out)[0] + ".png"
-  plot(result, png)
-  with open(os.path.splitext(args.out)[0] + ".md", "w") as f:
-    f.write(report_md(result))
   print(json.dumps(result["summary"], indent=1))
   print(f"wrote {args.out} and {png}")
   return 0
