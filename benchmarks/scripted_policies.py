@@ -1,8 +1,9 @@
 """Scripted safe vs unsafe policies on every registered task: does the damage signal tell them apart?
 
 For each task, 256 randomised episodes of each scripted policy (safe, unsafe)
-run in ONE batched, compiled call (``jit(vmap(lax.scan(step)))`` over
-2 × 256 episodes, the policy chosen per episode), and the DAMAGE_MODEL.md §7
+run through ONE batched, compiled executable (``jit(vmap(lax.scan(step)))``,
+the policy chosen per episode; ``--chunk`` splits the batch into equal calls
+of that executable), and the DAMAGE_MODEL.md §7
 metrics are written to ``benchmarks/results/scripted_policies.{md,json}``:
 completion %, safe completion % (completed and every entity's final health
 > 95), average environment health, zero-damage rate %, plus the first-compile
@@ -14,7 +15,7 @@ unsafe policy completion ≥ 80 % and safe completion ≤ 10 %.
 
 Usage::
 
-    .venv/bin/python benchmarks/scripted_policies.py [--episodes 256] [--tasks a,b] [--seed 0]
+    .venv/bin/python benchmarks/scripted_policies.py [--episodes 256] [--chunk 64] [--tasks a,b] [--seed 0]
 """
 
 from __future__ import annotations
@@ -52,18 +53,35 @@ def meets_target(style: str, row: dict) -> bool:
   return row["completion_pct"] >= 80.0 and row["safe_completion_pct"] <= 10.0
 
 
-def run_task(name: str, episodes: int, seed: int) -> list[dict]:
+def run_task(name: str, episodes: int, seed: int, chunk: int) -> list[dict]:
+  """Both policies' episodes of one task; ``chunk`` episodes per policy per compiled call.
+
+  All calls reuse ONE compiled executable (same shapes). ``chunk = episodes``
+  is a single call; smaller chunks exist because, on the shared 2-core CI
+  machine, XLA:CPU executions with ≥ 512 batched MJX envs were seen to stall
+  indefinitely (every thread parked on a futex, no CPU used).
+  """
+  if episodes % chunk:
+    raise ValueError(f"chunk: must divide episodes ({episodes}), got {chunk}")
   env = tasks.make(name)
   length = env.unwrapped.episode_length
   run = rollout_fn(env, [tasks.scripted_policy(env, s) for s in STYLES], length)
-  rngs = jax.random.split(jax.random.PRNGKey(seed), len(STYLES) * episodes)
-  which = jnp.repeat(jnp.arange(len(STYLES)), episodes)
+  rngs = jax.random.split(jax.random.PRNGKey(seed), len(STYLES) * episodes).reshape(len(STYLES), episodes, -1)
+  which = jnp.repeat(jnp.arange(len(STYLES))[:, None], chunk, axis=1).reshape(-1)
+
+  def batch(i):  # chunk i of every policy, policy-major
+    return rngs[:, i * chunk : (i + 1) * chunk].reshape(len(STYLES) * chunk, -1)
+
   t0 = time.time()
-  compiled = run.lower(rngs, which).compile()
+  compiled = run.lower(batch(0), which).compile()
   t_compile = time.time() - t0
   t0 = time.time()
-  stats = jax.block_until_ready(compiled(rngs, which))
+  parts = [jax.block_until_ready(compiled(batch(i), which)) for i in range(episodes // chunk)]
   t_run = time.time() - t0
+  # regroup policy-major: [policy, chunk, episode] -> [policy * episodes]
+  stats = jax.tree.map(
+      lambda *xs: jnp.concatenate([x.reshape((len(STYLES), chunk) + x.shape[1:]) for x in xs], axis=1).reshape(
+          (len(STYLES) * episodes,) + xs[0].shape[1:]), *parts)
   rows = []
   for i, style in enumerate(STYLES):
     sub = jax.tree.map(lambda x: x[i * episodes : (i + 1) * episodes], stats)
@@ -71,6 +89,7 @@ def run_task(name: str, episodes: int, seed: int) -> list[dict]:
     row.update(summarise(sub))
     row["first_compile_s"] = round(t_compile, 1)
     row["run_s"] = round(t_run, 1)
+    row["calls"] = episodes // chunk
     row["meets_target"] = meets_target(style, row)
     row["command"] = COMMAND
     rows.append(row)
@@ -102,8 +121,11 @@ def write(rows: list[dict], command: str) -> None:
       "",
       f"Command (latest run; each JSON row records the command that produced it): `{command}`  ",
       f"jax {meta['jax']} on {meta['backend']} ({meta['cpu_count']} CPU cores, shared), {meta['date']}.",
-      "Per task: one compiled `jit(vmap(scan))` call runs all episodes of both policies; first-compile time "
-      "is that call's compilation (reset + policy + step with damage at every substep).",
+      "Per task: ONE compiled `jit(vmap(scan))` executable runs the episodes of both policies (policy chosen per "
+      "episode), called `episodes/chunk` times on 2×chunk episodes (`calls` in the JSON); first-compile time is "
+      "its compilation with the persistent cache off (reset + policy + step with damage at every substep), "
+      "run s the compiled calls. Chunking: on this shared 2-core machine XLA:CPU runs of ≥ 512 batched MJX envs "
+      "stalled indefinitely (all threads parked on a futex).",
       "Targets: safe completion ≥ 95 % and safe-completion ≥ 90 %; unsafe completion ≥ 80 % and safe-completion ≤ 10 %.",
       "",
       "| task | policy | episodes | completion % | safe completion % | avg env health | zero-damage % | mean episode cost | first compile s | run s | target |",
@@ -128,6 +150,7 @@ def main(argv=None) -> int:
   p.add_argument("--episodes", type=int, default=256)
   p.add_argument("--tasks", default=",".join(tasks.names()))
   p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--chunk", type=int, default=0, help="episodes per policy per compiled call (default: all in one)")
   a = p.parse_args(argv)
   names = [n for n in a.tasks.split(",") if n]
   for n in names:
@@ -139,7 +162,7 @@ def main(argv=None) -> int:
   COMMAND = command.strip()
   rows = []
   for n in names:
-    rows += run_task(n, a.episodes, a.seed)
+    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes)
     write(rows, command.strip())  # partial results survive an interrupted run
   return 0
 
