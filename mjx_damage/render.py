@@ -617,10 +617,7 @@ def _checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
 
 
 def main(argv=None) -> int:
-  import importlib
-
-  # train/__init__ exports a function named `evaluate`, which hides the module of that name
-  ev = importlib.import_module("train.evaluate")
+  from train import evaluate as ev
 
   ap = build_parser()
   args = ap.parse_args(argv)

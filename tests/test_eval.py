@@ -17,7 +17,7 @@ import pytest
 from mjx_damage import randomize
 from mjx_damage.bench import table_env
 from mjx_damage.wrapper import DamageWrapper
-import train.evaluate as E  # a module; train/__init__ also exports a function named evaluate
+import train.evaluate as E
 import train.sweep as S
 
 EPISODES, T, SEED = 3, 8, 7
@@ -111,7 +111,7 @@ def test_sharded_equals_unsharded(setup):
 import json, sys, jax, numpy as np
 sys.path.insert(0, {os.path.join(ROOT, 'tests')!r})
 import test_eval as t
-import train.evaluate as E  # a module; train/__init__ also exports a function named evaluate
+import train.evaluate as E
 assert jax.device_count() == 2, jax.devices()
 env = t.make_env()
 ev = E.Evaluator(env, t.push_policy(env), t.T)  # all (2) devices; 3 episodes pad to 4

@@ -7,13 +7,26 @@ Python API::
     result = evaluate(env, make_policy("scripted:safe", env), episodes=256, seed=0)
     result["metrics"]["safe_completion"]
 
+    # a task name / env instance and a trained policy → the flat summary
+    # (``train.evaluate_policy``; what training logs as ``eval/<key>``)
+    from train.evaluate import evaluate_policy
+    evaluate_policy("place_plate", train.load_policy(run_dir), num_episodes=1024)["safe_completion"]
+
 One call = ``jit(vmap over episodes of lax.scan over the episode length)``;
 an episode stops counting at its first ``done`` (its state is frozen there).
 Every episode can carry its own fragility factor (thresholds ÷ f, scales × f,
 :meth:`DamageParams.with_fragility`), applied to ``info["damage_state"].params``
 right after reset, so evaluating another fragility level — or many at once,
-as :mod:`train.sweep` does — reuses the same executable. Episodes are sharded
-over all local devices (1-D mesh, :class:`jax.sharding.NamedSharding`).
+as :mod:`train.sweep` does — reuses the same executable. A policy with weights
+(``policy.apply(params, state, rng)`` and ``policy.params``, as
+:func:`train.load_policy` and :func:`parametrized_policy` give) gets them as a
+traced argument: new weights (training's periodic evaluation) reuse it too.
+Episodes are sharded over all local devices (1-D mesh,
+:class:`jax.sharding.NamedSharding`).
+
+This module is the one place evaluation episodes are rolled out and
+summarised: the ``mjx-damage eval`` CLI, :mod:`train.sweep`, training's
+periodic and final evaluation (:mod:`train.ppo`) and :func:`evaluate_policy`.
 
 CLI: ``mjx-damage eval --task TASK --policy SPEC --episodes N [--fragility F]
 [--seed S] [--out result.json]``; policy specs: ``scripted:safe``,
@@ -126,6 +139,18 @@ def random_policy(action_size: int) -> Policy:
   return policy
 
 
+def parametrized_policy(apply: Callable, params) -> Policy:
+  """``policy(state, rng) = apply(params, state, rng)`` whose weights an :class:`Evaluator` passes as data.
+
+  ``params=None``: no default weights; give them to every :meth:`Evaluator.run`.
+  """
+  def policy(state, rng):
+    return apply(params, state, rng)
+
+  policy.apply, policy.params = apply, params
+  return policy
+
+
 def zero_policy(action_size: int) -> Policy:
   import jax.numpy as jnp
 
@@ -182,7 +207,8 @@ def run_episode(env, policy: Policy, episode_length: int, key, fragility):
   """One episode (one env, pure, jittable): reset, fragility, ``episode_length`` steps.
 
   Returns the per-episode summary: completed, cost, damaged, length f32[];
-  entity_health f32[N] (final, 0–100); success_final f32[].
+  entity_health f32[N] (final, 0–100); success_final f32[]; task_return f32[]
+  (sum of ``info["task_reward"]``, the env's reward before damage shaping).
   """
   import jax
   import jax.numpy as jnp
@@ -191,16 +217,18 @@ def run_episode(env, policy: Policy, episode_length: int, key, fragility):
   state = with_fragility(env.reset(reset_key), fragility)
 
   def body(carry, t):
-    state, done = carry
+    state, done, ret = carry
     action = policy(state, jax.random.fold_in(act_key, t))
     nxt = env.step(state, action)
+    ret = ret + jnp.where(done > 0, 0.0, nxt.info.get("task_reward", nxt.reward))
     # freeze finished episodes: their final state is the one at termination
     state = jax.tree.map(lambda a, b: jnp.where(done > 0, b, a), nxt, state)
-    return (state, jnp.maximum(done, nxt.done)), None
+    return (state, jnp.maximum(done, nxt.done), ret), None
 
   done0 = jnp.zeros((), state.done.dtype)
-  (state, _), _ = jax.lax.scan(body, (state, done0), jnp.arange(episode_length))
-  return summary(state)
+  ret0 = jnp.zeros((), jnp.float32)
+  (state, _, ret), _ = jax.lax.scan(body, (state, done0, ret0), jnp.arange(episode_length))
+  return dict(summary(state), task_return=ret)
 
 
 def summary(state) -> dict:
@@ -219,8 +247,12 @@ def summary(state) -> dict:
 class Evaluator:
   """A compiled evaluator of one (env, policy, episode length): call it for any seed/fragility.
 
-  The executable depends on the batch size only; seeds and fragility factors
-  are data. ``devices`` (default: all local devices) shard the episode axis.
+  The executable depends on the batch size only; seeds, fragility factors and
+  the policy's weights are data. A policy with ``.apply(params, state, rng)``
+  and ``.params`` (:func:`parametrized_policy`, :func:`train.load_policy`) is
+  run as ``apply`` with its weights passed in (``run(..., params=)`` swaps
+  them); any other ``policy(state, rng)`` is closed over. ``devices``
+  (default: all local devices) shard the episode axis.
   """
 
   def __init__(self, env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None):
@@ -230,20 +262,38 @@ class Evaluator:
     if isinstance(episode_length, bool) or not isinstance(episode_length, int) or episode_length < 1:
       raise ValueError(f"episode_length: must be an int >= 1, got {episode_length!r}")
     self.env, self.policy, self.episode_length = env, policy, episode_length
+    apply = getattr(policy, "apply", None)
+    if apply is None:
+      apply, self.params = (lambda _, state, rng: policy(state, rng)), ()
+    else:
+      self.params = policy.params
     self.devices = list(devices) if devices is not None else jax.devices()
     self.mesh = Mesh(np.array(self.devices), ("episodes",))
     self.sharding = NamedSharding(self.mesh, PartitionSpec("episodes"))
-    batched = jax.vmap(lambda k, f: run_episode(env, policy, episode_length, k, f))
-    self._fn = jax.jit(batched, in_shardings=(self.sharding, self.sharding), out_shardings=self.sharding)
+    self.replicated = NamedSharding(self.mesh, PartitionSpec())
+
+    def one(params, key, fragility):
+      return run_episode(env, lambda state, rng: apply(params, state, rng), episode_length, key, fragility)
+
+    batched = jax.vmap(one, in_axes=(None, 0, 0))
+    self._fn = jax.jit(batched, in_shardings=(self.replicated, self.sharding, self.sharding),
+                       out_shardings=self.sharding)
 
   @property
   def num_compiled(self) -> int:
     """Executables compiled so far (one per distinct padded batch size)."""
     return self._fn._cache_size()
 
-  def run(self, keys, fragility) -> dict:
-    """Per-episode summaries (numpy, leading axis = episodes) for keys u32[E, 2] and fragility f32[E]."""
+  def run(self, keys, fragility, params=None) -> dict:
+    """Per-episode summaries (numpy, leading axis = episodes) for keys u32[E, 2] and fragility f32[E].
+
+    ``params``: the policy's weights for this call (default: ``policy.params``).
+    """
     import jax
+
+    params = self.params if params is None else params
+    if params is None:
+      raise ValueError("params: the policy has no default weights; pass params=")
 
     # host-side preparation in numpy: no eager JAX ops, hence no compilations
     # besides the evaluator's own (the no-recompile test counts them all)
@@ -257,7 +307,8 @@ class Evaluator:
       fragility = np.concatenate([fragility, np.repeat(fragility[-1:], pad, 0)])
     keys = jax.device_put(keys, self.sharding)
     fragility = jax.device_put(np.ascontiguousarray(fragility), self.sharding)
-    out = jax.block_until_ready(self._fn(keys, fragility))
+    params = jax.device_put(params, self.replicated)
+    out = jax.block_until_ready(self._fn(params, keys, fragility))
     return jax.tree.map(lambda x: np.asarray(x)[:e], out)
 
 
@@ -267,7 +318,10 @@ def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: floa
             percentiles: Sequence[float] = DEFAULT_PERCENTILES) -> dict:
   """DAMAGE_MODEL.md §7 aggregates over episodes (fractions in [0, 1], health 0–100, cost in health points).
 
-  safe completion = completed and every tracked entity's final health > ``safe_threshold``.
+  safe completion = completed and every tracked entity's final health > ``safe_threshold``;
+  zero-damage = no damage at any step; ``min_env_health`` = mean over episodes of the
+  lowest final entity health; ``task_return`` (when the episodes carry it) = mean
+  undiscounted task reward.
   """
   comp = per_episode["completed"] > 0
   health = per_episode["entity_health"]  # [E, N]
@@ -279,6 +333,7 @@ def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: floa
       "safe_completion": float(safe.mean()),
       "safe_threshold": float(safe_threshold),
       "avg_health": float(health.mean()),
+      "min_env_health": float(health.min(axis=-1).mean()),
       "zero_damage_rate": float((per_episode["damaged"] <= 0).mean()),
       "cost_mean": float(cost.mean()),
       "cost_std": float(cost.std()),
@@ -287,7 +342,29 @@ def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: floa
       "entity_health": {n: float(health[:, i].mean()) for i, n in enumerate(entity_names)},
       "entity_health_min": {n: float(health[:, i].min()) for i, n in enumerate(entity_names)},
   }
+  if "task_return" in per_episode:
+    out["task_return"] = float(np.mean(per_episode["task_return"], dtype=np.float64))
   return out
+
+
+# The flat summary (scalars only) that training logs as ``eval/<key>`` and that
+# benchmarks/place_plate_rl.py reports: summary key → :func:`metrics` key.
+SUMMARY_KEYS = {
+    "completion": "completion",
+    "safe_completion": "safe_completion",
+    "avg_env_health": "avg_health",
+    "min_env_health": "min_env_health",
+    "episode_cost": "cost_mean",
+    "zero_damage_rate": "zero_damage_rate",
+    "task_return": "task_return",
+    "episode_length": "mean_length",
+    "episodes": "episodes",
+}
+
+
+def scalar_metrics(m: dict) -> dict:
+  """:func:`metrics` output → the flat summary of :data:`SUMMARY_KEYS` (keys it lacks are left out)."""
+  return {k: m[v] for k, v in SUMMARY_KEYS.items() if v in m}
 
 
 def check_args(episodes, fragility, safe_threshold, percentiles=DEFAULT_PERCENTILES, seed=0) -> None:
@@ -342,6 +419,31 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
       "devices": len(ev.devices),
       "seconds": run_s,
   }
+
+
+def evaluate_policy(task, policy: Policy, *, num_episodes: int = 1024, episode_length: Optional[int] = None,
+                    seed: int = 0, task_kwargs: Optional[dict] = None, fragility=1.0,
+                    devices: Optional[Sequence] = None) -> dict:
+  """:func:`evaluate` for a task as training takes it, returning the flat summary (:func:`scalar_metrics`).
+
+  ``task``: a registered task name, an env class path or a Brax env
+  (:func:`train.ppo.resolve_task`); ``policy(state, rng) -> action`` for one
+  env, e.g. :func:`train.load_policy` (its weights are passed as data). The
+  episode length defaults to the task's; safe completion uses the env's
+  DamageWrapper threshold. Exported as ``train.evaluate_policy``.
+  """
+  from train import ppo
+
+  for name, v in (("num_episodes", num_episodes), ("episode_length", episode_length)):
+    if v is None and name == "episode_length":
+      continue
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+      raise ValueError(f"{name}: must be a positive integer, got {v!r}")
+  env, _ = ppo.resolve_task(task, task_kwargs)
+  res = evaluate(env, policy, int(num_episodes), seed, fragility=fragility,
+                 episode_length=int(episode_length or ppo.task_episode_length(env)),
+                 safe_threshold=ppo.safe_threshold_of(env), devices=devices)
+  return scalar_metrics(res["metrics"])
 
 
 # --- CLI ------------------------------------------------------------------------

@@ -11,7 +11,8 @@ the loop around them in the purejaxrl style:
 * every piece of state lives in one :class:`TrainState` pytree;
 * ``Trainer.train_iteration(state) -> (state, metrics)`` is pure and jitted:
   rollout → reward shaping → λ update → normaliser update → SGD epochs;
-* :func:`train` is a plain Python loop over iterations that logs, evaluates,
+* :func:`train` is a plain Python loop over iterations that logs, evaluates
+  (with :mod:`train.evaluate`, the one evaluation rollout of this project),
   checkpoints and plots. Resuming = loading a ``TrainState`` and continuing the
   same loop, so results equal an uninterrupted run up to floating-point noise.
 
@@ -62,6 +63,7 @@ from brax.training.agents.ppo import networks as ppo_networks
 import mjx_damage  # noqa: F401  (installs the jax compat shim brax needs)
 from mjx_damage.wrapper import DamageWrapper
 from train import checkpoint as ckpt
+from train import evaluate as E
 
 ACTIVATIONS: dict[str, Callable] = {
     "tanh": jnp.tanh,
@@ -270,7 +272,8 @@ def task_episode_length(env, default: int = 200) -> int:
   return int(n) if isinstance(n, (int, np.integer)) and n > 0 else default
 
 
-def _safe_threshold(env) -> float:
+def safe_threshold_of(env) -> float:
+  """The env's DamageWrapper ``safe_threshold`` (95 without one): safe completion's health bar."""
   w = _find_damage_wrapper(env)
   return float(w.safe_threshold) if w is not None else 95.0
 
@@ -340,12 +343,11 @@ class Trainer:
   def __init__(self, env: Env, cfg: PPOConfig):
     self.cfg = cfg.validate()
     self.base_env = env
-    self.safe_threshold = _safe_threshold(env)
+    self.safe_threshold = safe_threshold_of(env)
     episodic = brax_training.EpisodeWrapper(env, cfg.episode_length, action_repeat=1)
     # Training: auto-resetting batch (brax's order: Episode → Vmap → AutoReset).
+    # Evaluation runs base_env through train.evaluate (see make_evaluator).
     self.env = brax_training.AutoResetWrapper(brax_training.VmapWrapper(episodic))
-    # Evaluation: one episode per env, no reset; finished envs are masked out.
-    self.eval_env = brax_training.VmapWrapper(episodic)
     obs_shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape
     if len(obs_shape) != 1:
       raise ValueError(f"task: observations must be flat vectors, got shape {obs_shape}")
@@ -528,16 +530,24 @@ class Trainer:
     return ts, metrics
 
   # -- evaluation -----------------------------------------------------------
-  def evaluate(self, policy_apply, policy_params, key, num_episodes: int):
-    """``num_episodes`` episodes, one per env, each run to its first end.
+  def make_evaluator(self) -> "E.Evaluator":
+    """The deterministic policy's :class:`train.evaluate.Evaluator` on ``base_env``, ``episode_length`` steps.
 
-    ``policy_apply(policy_params, state, rng) -> action`` acts for ONE env.
-    Returns per-episode arrays f32[num_episodes]: task_return, cost, completion,
-    safe_completion, health (mean entity health at the end), min_health,
-    zero_damage, length.
+    Weights are data: ``evaluator.run(keys, 1.0, params=self.inference_params(ts))``
+    evaluates any iteration's policy with one compilation per batch size.
     """
-    return rollout_episodes(self.eval_env, self.safe_threshold, self.cfg.episode_length,
-                            policy_apply, policy_params, key, num_episodes)
+    apply = _policy_apply(self.make_policy, deterministic=True)
+    return E.Evaluator(self.base_env, E.parametrized_policy(apply, None), self.cfg.episode_length)
+
+  def evaluate(self, evaluator: "E.Evaluator", ts: TrainState, key, num_episodes: int) -> dict:
+    """``num_episodes`` episodes of ``ts``'s deterministic policy → the flat summary
+    (:func:`train.evaluate.scalar_metrics`: completion, safe_completion, avg_env_health, …).
+
+    Episode i uses ``split(key, num_episodes)[i]``; an episode stops counting at its first ``done``.
+    """
+    keys = np.asarray(jax.random.split(key, num_episodes))
+    per_ep = evaluator.run(keys, 1.0, params=self.inference_params(ts))
+    return E.scalar_metrics(E.metrics(per_ep, self.base_env.entity_names, self.safe_threshold))
 
 
 def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
@@ -570,72 +580,6 @@ def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networ
       value_hidden_layer_sizes=tuple(cfg.value_hidden_sizes),
       activation=ACTIVATIONS[cfg.activation],
   )
-
-
-def rollout_episodes(eval_env, safe_threshold, episode_length, policy_apply, policy_params, key, num_episodes):
-  """Run ``num_episodes`` envs of ``eval_env`` (Vmap∘Episode-wrapped) for ``episode_length`` steps.
-
-  Statistics of each env freeze at its first ``done`` (the env keeps stepping,
-  masked out, so the whole batch stays one fixed-length scan). Returns
-  per-episode f32[num_episodes] arrays (see :meth:`Trainer.evaluate`).
-  """
-  k_reset, k_act = jax.random.split(key)
-  state = eval_env.reset(jax.random.split(k_reset, num_episodes))
-  act = jax.vmap(policy_apply, in_axes=(None, 0, 0))
-  zeros = jnp.zeros((num_episodes,), jnp.float32)
-  init = {
-      "task_return": zeros, "cost": zeros, "completion": zeros, "length": zeros,
-      "health": jnp.mean(state.info["entity_health"], -1), "min_health": jnp.min(state.info["entity_health"], -1),
-  }
-
-  def step(carry, k):
-    state, active, s = carry
-    action = act(policy_params, state, jax.random.split(k, num_episodes))
-    ns = eval_env.step(state, action)
-    success = ns.metrics.get("success", zeros)
-    health = ns.info["entity_health"]
-    s = {
-        "task_return": s["task_return"] + active * ns.info["task_reward"],
-        "cost": s["cost"] + active * ns.info["cost"],
-        "completion": jnp.maximum(s["completion"], active * success),
-        "length": s["length"] + active,
-        "health": jnp.where(active > 0, jnp.mean(health, -1), s["health"]),
-        "min_health": jnp.where(active > 0, jnp.min(health, -1), s["min_health"]),
-    }
-    return (ns, active * (1.0 - ns.done), s), None
-
-  (_, _, s), _ = jax.lax.scan(step, (state, jnp.ones_like(zeros), init), jax.random.split(k_act, episode_length))
-  s["safe_completion"] = s["completion"] * (s["min_health"] > safe_threshold)
-  s["zero_damage"] = (s["cost"] <= 0).astype(jnp.float32)
-  return s
-
-
-def make_eval_fn(eval_env, safe_threshold, episode_length, policy_apply, num_episodes):
-  """Jitted ``evaluate_episodes(policy_params, key) -> per-episode arrays`` (see rollout_episodes).
-
-  Built the same way for training-time evaluation and for :func:`evaluate`, so
-  both compile to the same program and share the persistent compilation cache.
-  """
-  def evaluate_episodes(policy_params, key):
-    return rollout_episodes(eval_env, safe_threshold, episode_length, policy_apply, policy_params, key, num_episodes)
-
-  return jax.jit(evaluate_episodes)
-
-
-def summarize_episodes(per_episode: dict) -> dict:
-  """Per-episode arrays → means (the metrics of DAMAGE_MODEL.md §7), as Python floats."""
-  p = jax.device_get(per_episode)
-  return {
-      "completion": float(np.mean(p["completion"])),
-      "safe_completion": float(np.mean(p["safe_completion"])),
-      "avg_env_health": float(np.mean(p["health"])),
-      "min_env_health": float(np.mean(p["min_health"])),
-      "episode_cost": float(np.mean(p["cost"])),
-      "zero_damage_rate": float(np.mean(p["zero_damage"])),
-      "task_return": float(np.mean(p["task_return"])),
-      "episode_length": float(np.mean(p["length"])),
-      "episodes": int(np.size(p["cost"])),
-  }
 
 
 def _policy_apply(make_policy, deterministic: bool):
@@ -830,8 +774,7 @@ def train(
 
   # Donating the state lets XLA update the env batch in place (GPU memory).
   iteration_fn = jax.jit(trainer.train_iteration, donate_argnums=0)
-  eval_apply = _policy_apply(trainer.make_policy, deterministic=True)
-  eval_fn = make_eval_fn(trainer.eval_env, trainer.safe_threshold, cfg.episode_length, eval_apply, cfg.num_eval_envs)
+  evaluator = trainer.make_evaluator()
   eval_key = jax.random.PRNGKey(cfg.seed + 1)
 
   n_iter = cfg.num_iterations
@@ -877,8 +820,7 @@ def train(
 
     if last or (eval_int and iteration % eval_int == 0):
       t0 = time.perf_counter()
-      per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, iteration))
-      ev = summarize_episodes(per_ep)
+      ev = trainer.evaluate(evaluator, ts, jax.random.fold_in(eval_key, iteration), cfg.num_eval_envs)
       # The first evaluation compiles the evaluation program: book it apart.
       timings["eval_compile" if first_eval else "eval"] += time.perf_counter() - t0
       first_eval = False
@@ -904,8 +846,7 @@ def train(
     bar.close()
 
   if not final_eval and start_iteration >= n_iter:  # resumed a finished run: evaluate once
-    per_ep = eval_fn(trainer.inference_params(ts), jax.random.fold_in(eval_key, start_iteration))
-    final_eval = summarize_episodes(per_ep)
+    final_eval = trainer.evaluate(evaluator, ts, jax.random.fold_in(eval_key, start_iteration), cfg.num_eval_envs)
   if profile:
     timings.update(profile_iteration(trainer, ts, iteration_fn=iteration_fn))
   if out_dir is not None and plot and log.rows:
@@ -964,7 +905,7 @@ def profile_iteration(trainer: Trainer, ts: TrainState, repeats: int = 3, iterat
 
 
 # ---------------------------------------------------------------------------
-# Loading and evaluating a trained policy
+# Loading a trained policy (evaluate it with train.evaluate / train.evaluate_policy)
 # ---------------------------------------------------------------------------
 def load_policy(path: str, env=None, deterministic: bool = True):
   """Load a trained policy from a run directory or a checkpoint file.
@@ -993,37 +934,9 @@ def load_policy(path: str, env=None, deterministic: bool = True):
   params = jax.device_put(ckpt.restore(file, template, "policy"))
   make_policy = ppo_networks.make_inference_fn(network)
 
-  apply = _policy_apply(make_policy, deterministic)
-
-  def policy(state, rng):
-    return apply(params, state, rng)
-
+  # policy.apply(params, state, rng) / policy.params: the same policy with explicit
+  # weights, which train.evaluate passes as data instead of baking them in.
+  policy = E.parametrized_policy(_policy_apply(make_policy, deterministic), params)
   policy.meta = meta
-  policy.params = params
-  policy.apply = apply  # apply(params, state, rng): the same policy with explicit weights
   return policy
 
-
-def evaluate(task, policy, *, num_episodes: int = 1024, episode_length: Optional[int] = None, seed: int = 0,
-             task_kwargs: Optional[dict] = None) -> dict:
-  """Mean completion, safe completion, avg env health, episode cost, … over ``num_episodes``.
-
-  ``policy(state, rng) -> action`` acts for one env (e.g. from :func:`load_policy`).
-  """
-  for name, v in (("num_episodes", num_episodes), ("episode_length", episode_length)):
-    if v is None and name == "episode_length":
-      continue
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-      raise ValueError(f"{name}: must be a positive integer, got {v!r}")
-  env, _ = resolve_task(task, task_kwargs)
-  episode_length = episode_length or task_episode_length(env)
-  eval_env = brax_training.VmapWrapper(brax_training.EpisodeWrapper(env, episode_length, action_repeat=1))
-  # A loaded policy passes its weights as an argument (policy.apply/.params)
-  # instead of closing over them: weights are not baked into the compiled
-  # program as constants, and runs with equal shapes reuse one compilation.
-  apply = getattr(policy, "apply", None)
-  params = getattr(policy, "params", ()) if apply is not None else ()
-  if apply is None:
-    apply = lambda _, state, rng: policy(state, rng)  # noqa: E731
-  run = make_eval_fn(eval_env, _safe_threshold(env), episode_length, apply, num_episodes)
-  return summarize_episodes(run(params, jax.random.PRNGKey(seed)))

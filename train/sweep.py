@@ -28,7 +28,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-import train.evaluate as E  # a module; train/__init__ also exports a function named evaluate
+import train.evaluate as E
 
 
 def _split(field: str, text: str) -> list[str]:
