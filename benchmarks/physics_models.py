@@ -132,7 +132,7 @@ def measure(name: str, config: dict, envs: int, steps: int, substeps: int) -> di
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--envs", type=int, default=1024)
-  p.add_argument("--steps", type=int, default=2, help="env steps timed per variant (after an ahead-of-time compile)")
+  p.add_argument("--steps", type=int, default=5, help="env steps timed per variant (after an ahead-of-time compile)")
   p.add_argument("--substeps", type=int, default=5, help="physics substeps (4 ms) per env step")
   p.add_argument("--particles", type=int, default=128)
   p.add_argument("--variants", default="base,temperature,liquid,both")
