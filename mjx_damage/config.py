@@ -23,13 +23,16 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
 import os
 from typing import Any, Mapping, Optional
 
 import mujoco
 
 from mjx_damage import params as P
+from mjx_damage.validate import check_keys as _check_keys
+from mjx_damage.validate import fail as _fail
+from mjx_damage.validate import mapping as _mapping
+from mjx_damage.validate import number
 
 _TOP_KEYS = ("tau", "track", "entities", "temperature", "liquid")
 _ENTITY_KEYS = ("params", "bodies", "mechanical", "thermal", "fluid", "links", "heat")
@@ -68,31 +71,8 @@ class ResolvedConfig:
     return P.stack_link_params([l.params for l in self.links], self.tau)
 
 
-def _fail(field: str, msg: str):
-  raise ValueError(f"{field}: {msg}")
 
 
-def _number(field: str, v, *, nonneg: bool = True) -> float:
-  if isinstance(v, bool) or not isinstance(v, (int, float)):
-    _fail(field, f"expected a number, got {type(v).__name__} {v!r}")
-  v = float(v)
-  if math.isnan(v) or math.isinf(v):
-    _fail(field, f"must be finite, got {v!r}")
-  if nonneg and v < 0:
-    _fail(field, f"must be >= 0, got {v!r}")
-  return v
-
-
-def _mapping(field: str, v) -> Mapping:
-  if not isinstance(v, Mapping):
-    _fail(field, f"expected a mapping, got {type(v).__name__} {v!r}")
-  return v
-
-
-def _check_keys(field: str, m: Mapping, allowed) -> None:
-  for k in m:
-    if k not in allowed:
-      _fail(f"{field}.{k}" if field else str(k), f"unknown key; allowed: {', '.join(allowed)}")
 
 
 def _apply(field: str, base, overrides):
@@ -106,7 +86,7 @@ def _apply(field: str, base, overrides):
   _check_keys(field, overrides, _FIELDS[modality])
   values = {} if base is None else dataclasses.asdict(base)
   for k, v in overrides.items():
-    values[k] = _number(f"{field}.{k}", v, nonneg=modality != "thermal" or k == "scale")
+    values[k] = number(f"{field}.{k}", v, lo=0.0 if modality != "thermal" or k == "scale" else None)
   missing = [k for k in _FIELDS[modality] if k not in values]
   if missing:
     _fail(field, f"no table row to start from; give all of {', '.join(_FIELDS[modality])} (missing {', '.join(missing)})")
@@ -140,9 +120,7 @@ def resolve(config, model: mujoco.MjModel) -> ResolvedConfig:
   """Validate ``config`` against ``model`` and resolve every tracked link's parameters."""
   cfg = load(config)
   _check_keys("", cfg, _TOP_KEYS)
-  tau = _number("tau", cfg.get("tau", P.DEFAULT_TAU))
-  if tau <= 0:
-    _fail("tau", f"must be > 0, got {tau!r}")
+  tau = number("tau", cfg.get("tau", P.DEFAULT_TAU), positive=True)
   entities = _mapping("entities", cfg.get("entities"))
   if not entities:
     _fail("entities", "empty: nothing to track")

@@ -47,7 +47,6 @@ configured: nothing computed, every exposure stays 0), :func:`init`,
 
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import jax
@@ -57,6 +56,10 @@ import numpy as np
 from flax import struct
 
 from mjx_damage import geometry as G
+from mjx_damage.validate import fail as _fail
+from mjx_damage.validate import integer as _int
+from mjx_damage.validate import number as _number
+from mjx_damage.validate import vec3 as _vec3
 
 MAX_PARTICLES = 4096
 DEFAULTS = {
@@ -111,37 +114,8 @@ class LiquidState:
   vel: jax.Array
 
 
-def _fail(field: str, msg: str):
-  raise ValueError(f"{field}: {msg}")
 
 
-def _number(field: str, v, lo=None, hi=None, positive=False) -> float:
-  if isinstance(v, bool) or not isinstance(v, (int, float)):
-    _fail(field, f"expected a number, got {type(v).__name__} {v!r}")
-  v = float(v)
-  if not math.isfinite(v):
-    _fail(field, f"must be finite, got {v!r}")
-  if positive and v <= 0:
-    _fail(field, f"must be > 0, got {v!r}")
-  if lo is not None and v < lo:
-    _fail(field, f"must be >= {lo}, got {v!r}")
-  if hi is not None and v > hi:
-    _fail(field, f"must be <= {hi}, got {v!r}")
-  return v
-
-
-def _int(field: str, v, lo: int, hi: int) -> int:
-  if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-    _fail(field, f"expected an integer, got {type(v).__name__} {v!r}")
-  if not lo <= v <= hi:
-    _fail(field, f"must be in [{lo}, {hi}], got {v!r}")
-  return int(v)
-
-
-def _vec3(field: str, v, nonneg=False) -> np.ndarray:
-  if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)) or len(v) != 3:
-    _fail(field, f"expected a list of 3 numbers, got {v!r}")
-  return np.array([_number(f"{field}[{i}]", x, lo=0.0 if nonneg else None) for i, x in enumerate(v)], np.float64)
 
 
 def _lattice(n: int, size: np.ndarray, spacing: float, field: str) -> np.ndarray:

@@ -164,7 +164,10 @@ class DamageParams:
     a recompilation. Temperature thresholds move toward/away from ambient
     (22 °C) rather than toward 0 °C.
     """
-    f = jnp.asarray(factor, jnp.float32)[..., None]
+    return self.scale_fragility(jnp.asarray(factor, jnp.float32)[..., None])
+
+  def scale_fragility(self, f) -> "DamageParams":
+    """:meth:`with_fragility` with ``f`` broadcast against the f32[..., L] fields (e.g. one factor per link)."""
     ambient = 22.0
     return self.replace(
         mech_threshold=self.mech_threshold / f,

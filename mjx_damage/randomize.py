@@ -124,27 +124,13 @@ def fragility_randomizer(ranges: Mapping, per_link: bool = False) -> ParamsFn:
       if name == "fragility":
         # with_fragility broadcasts a per-env factor over links; a per-link
         # factor is already link-shaped, so drop the axis it would add.
-        params = params.with_fragility(f) if not per_link else _fragility_per_link(params, f)
+        params = params.with_fragility(f) if not per_link else params.scale_fragility(f)
       else:
         scale = f if per_link else f[..., None]
         params = params.replace(**{name: getattr(params, name) * scale})
     return params
 
   return params_fn
-
-
-def _fragility_per_link(params: DamageParams, f: jax.Array) -> DamageParams:
-  """``with_fragility`` with a factor per link (f32[..., L])."""
-  ambient = 22.0
-  return params.replace(
-      mech_threshold=params.mech_threshold / f,
-      mech_scale=params.mech_scale * f,
-      t_hot=ambient + (params.t_hot - ambient) / f,
-      t_cold=ambient + (params.t_cold - ambient) / f,
-      thermal_scale=params.thermal_scale * f,
-      fluid_threshold=params.fluid_threshold / f,
-      fluid_scale=params.fluid_scale * f,
-  )
 
 
 def fragility_params(default_params: DamageParams, factor) -> DamageParams:

@@ -34,7 +34,6 @@ and :func:`advance`. A task switches a source with :func:`set_source` inside jit
 
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import jax
@@ -44,6 +43,10 @@ import numpy as np
 from flax import struct
 
 from mjx_damage import geometry as G
+from mjx_damage.validate import check_keys as _check_keys
+from mjx_damage.validate import fail as _fail
+from mjx_damage.validate import mapping as _mapping
+from mjx_damage.validate import number as _number
 
 AMBIENT = 22.0  # °C
 ABSOLUTE_ZERO = -273.15  # °C
@@ -94,31 +97,8 @@ class ThermalState:
   source_temperature: jax.Array
 
 
-def _fail(field: str, msg: str):
-  raise ValueError(f"{field}: {msg}")
 
 
-def _number(field: str, v, lo=None) -> float:
-  if isinstance(v, bool) or not isinstance(v, (int, float)):
-    _fail(field, f"expected a number, got {type(v).__name__} {v!r}")
-  v = float(v)
-  if not math.isfinite(v):
-    _fail(field, f"must be finite, got {v!r}")
-  if lo is not None and v < lo:
-    _fail(field, f"must be >= {lo}, got {v!r}")
-  return v
-
-
-def _mapping(field: str, v) -> Mapping:
-  if not isinstance(v, Mapping):
-    _fail(field, f"expected a mapping, got {type(v).__name__} {v!r}")
-  return v
-
-
-def _check_keys(field: str, m: Mapping, allowed) -> None:
-  for k in m:
-    if k not in allowed:
-      _fail(f"{field}.{k}", f"unknown key; allowed: {', '.join(allowed)}")
 
 
 def heat_rates(raw: Mapping, entity: str) -> dict:
