@@ -31,6 +31,7 @@ jit and vmap them. The environment's ``State``:
 
 from __future__ import annotations
 
+import abc
 import os
 from typing import Callable, ClassVar
 
@@ -107,17 +108,21 @@ class Task(DamageEnv):
     """Look up static indices in the compiled model (called once in ``__init__``)."""
 
   # -- subclass API ------------------------------------------------------------------
+  @abc.abstractmethod
   def sample_init(self, rng: jax.Array, qpos: jax.Array) -> tuple[jax.Array, dict]:
-    raise NotImplementedError
+    """Randomised initial ``qpos`` f32[nq] and per-episode constants (dict of arrays)."""
 
+  @abc.abstractmethod
   def task_obs(self, d: mjx.Data, info: dict) -> jax.Array:
-    raise NotImplementedError
+    """Task part of the observation (object poses …), f32[k]."""
 
+  @abc.abstractmethod
   def evaluate(self, d: mjx.Data, info: dict):
-    raise NotImplementedError
+    """(dense reward f32[], success f32[] or bool[], extra metrics dict)."""
 
+  @abc.abstractmethod
   def policy(self, style: str) -> Policy:
-    raise NotImplementedError
+    """Scripted ``policy(state, rng) -> action`` for ``style`` in ("safe", "unsafe")."""
 
   def update_info(self, d: mjx.Data, info: dict) -> dict:
     """Advance task state kept in ``info`` after a control step (default: none)."""
