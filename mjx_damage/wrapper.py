@@ -3,7 +3,9 @@
 ``DamageWrapper(env, ...)`` adds to ``state.info``:
 
 * ``link_health`` f32[L], ``entity_health`` f32[N] (100 = intact),
-* ``cost`` f32[] — total damage (health points, all links, all models) this step,
+* ``cost`` f32[] — total damage (health points, all links, all models) this step; it
+  counts what the models evaluate even after a link's health is clipped at 0, so
+  a CMDP budget keeps seeing continued abuse of a destroyed object,
 * ``damage`` — {"mechanical", "thermal", "fluid"} totals this step, f32[] each,
 * ``task_reward`` f32[] — the wrapped env's reward before shaping,
 * ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7),
