@@ -56,7 +56,9 @@ import numpy as np
 from flax import struct
 
 from mjx_damage import geometry as G
+from mjx_damage.validate import check_keys as _check_keys
 from mjx_damage.validate import fail as _fail
+from mjx_damage.validate import mapping as _mapping
 from mjx_damage.validate import integer as _int
 from mjx_damage.validate import number as _number
 from mjx_damage.validate import vec3 as _vec3
@@ -140,11 +142,7 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
   cfg = raw.get("liquid")
   if cfg is None:
     return None
-  if not isinstance(cfg, Mapping):
-    _fail("liquid", f"expected a mapping, got {type(cfg).__name__} {cfg!r}")
-  for k in cfg:
-    if k not in _KEYS:
-      _fail(f"liquid.{k}", f"unknown key; allowed: {', '.join(_KEYS)}")
+  _check_keys("liquid", _mapping("liquid", cfg), _KEYS)
   if "particles" not in cfg:
     _fail("liquid.particles", "required (number of particles per environment)")
   n = _int("liquid.particles", cfg["particles"], 1, MAX_PARTICLES)
@@ -159,9 +157,7 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
   spawn = cfg.get("spawn")
   if not isinstance(spawn, Mapping):
     _fail("liquid.spawn", f"required: a mapping with center/size or body/offset/size, got {spawn!r}")
-  for k in spawn:
-    if k not in _SPAWN_KEYS:
-      _fail(f"liquid.spawn.{k}", f"unknown key; allowed: {', '.join(_SPAWN_KEYS)}")
+  _check_keys("liquid.spawn", spawn, _SPAWN_KEYS)
   if "size" not in spawn:
     _fail("liquid.spawn.size", "required: half-sizes [hx, hy, hz] of the spawn box, m")
   size = _vec3("liquid.spawn.size", spawn["size"], nonneg=True)
