@@ -97,6 +97,7 @@ def parse(argv):
   p.add_argument("--profile", action=argparse.BooleanOptionalAction, default=None,
                  help="time rollout vs update (one extra compile; default: on for GPU, off for --quick)")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  p.add_argument("--tag", default="", help="suffix of the result files, e.g. 'long_lagrangian' → rl_<task>_<device>_long_lagrangian.md")
   p.add_argument("--work-dir", default=None, help="run directories with checkpoints (default: /tmp/rl_place_plate)")
   args = p.parse_args(argv)
   base = QUICK if args.quick else GPU
@@ -106,6 +107,8 @@ def parse(argv):
   if args.profile is None:
     args.profile = not args.quick
   args.runs = [r.strip() for r in args.runs.split(",") if r.strip()]
+  if args.tag and not all(c.isalnum() or c in "_-" for c in args.tag):
+    p.error(f"--tag: letters, digits, '_' and '-' only, got {args.tag!r}")
   bad = [r for r in args.runs if r not in RUNS]
   if bad:
     p.error(f"--runs: unknown {bad}; choose from {RUNS}")
@@ -194,12 +197,12 @@ def main(argv=None) -> int:
   slug, device = device_info()
   os.makedirs(args.results_dir, exist_ok=True)
   task_slug = args.task.rsplit(":", 1)[-1].lower() if ":" in args.task else args.task
-  base = os.path.join(args.results_dir, f"rl_{task_slug}_{slug}")
+  base = os.path.join(args.results_dir, f"rl_{task_slug}_{slug}" + (f"_{args.tag}" if args.tag else ""))
   work = args.work_dir or os.path.join("/tmp", f"rl_{task_slug}_{slug}")
   task_kwargs = {"obs_mode": args.obs_mode} if args.task == "place_plate" else None
   episode_length = ppo.task_episode_length(ppo.resolve_task(args.task, task_kwargs)[0])
   settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
-              if k not in ("results_dir", "work_dir", "runs")}
+              if k not in ("results_dir", "work_dir", "runs", "tag")}
   payload = {
       "device": device, "date": time.strftime("%Y-%m-%d %H:%M"), "jax": jax.__version__,
       "command": " ".join(shlex.quote(a) for a in [os.path.relpath(sys.argv[0], ROOT)] + list(sys.argv[1:] if argv is None else argv)),

@@ -58,6 +58,17 @@ def test_lagrange_update_rule():
   assert float(lam) == 0.0
 
 
+def test_shape_reward():
+  r, c = jnp.array([1.0, -2.0, 0.5]), jnp.array([0.0, 3.0, 1e4])
+  # λ = 0: the paper's r − w·c exactly (penalty and task-only runs)
+  np.testing.assert_allclose(ppo.shape_reward(r, c, 2.0, 0.0), r - 2.0 * c)
+  # λ > 0: same task/cost trade-off, return scale bounded by 1/(1 + λ)
+  lam = 9.0
+  shaped = ppo.shape_reward(r, c, 0.0, lam)
+  np.testing.assert_allclose(shaped, (r - lam * c) / 10.0, rtol=1e-6)
+  assert float(jnp.max(jnp.abs(shaped))) <= float(jnp.max(jnp.abs(r)) + jnp.max(c))
+
+
 def test_smoke_train_checkpoint_load_evaluate(smoke, env):
   out = smoke.out_dir
   for f in ("config.json", "metrics.jsonl", "metrics.csv", "checkpoint.npz", "curves.png"):

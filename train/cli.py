@@ -37,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
                  help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode='\"paper\"'")
   p.add_argument("--out", dest="out_dir", required=True, help="run directory (config, metrics, checkpoint, curves)")
   p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.npz")
-  p.add_argument("--damage-weight", type=float, default=0.0, help="w in r = r_task - (w + λ)·cost")
+  p.add_argument("--damage-weight", type=float, default=0.0, help="w in r = (r_task - (w + λ)·cost)/(1 + λ); λ = 0 without --budget")
   p.add_argument("--budget", type=float, default=None, help="episode-cost budget ĉ: enables PPO-Lagrangian")
   p.add_argument("--lagrange-lr", type=float, default=0.02, help="λ ← max(0, λ + lr·(J_c − ĉ)) per iteration")
   p.add_argument("--lagrange-init", type=float, default=0.0)

@@ -18,12 +18,16 @@ the loop around them in the purejaxrl style:
 
 Reward used for the policy (per step)::
 
-    r = r_task − (w + λ)·cost
+    r = (r_task − (w + λ)·cost) / (1 + λ)
 
 with ``r_task = info["task_reward"]`` and ``cost = info["cost"]`` from
 :class:`mjx_damage.DamageWrapper` (which the env is wrapped with at weight 0:
 the trainer shapes the reward, so w and λ are traced values, not constants
-baked into the compiled env). Plain PPO with a damage penalty is λ ≡ 0.
+baked into the compiled env). Plain PPO with a damage penalty is λ ≡ 0, where
+this is the paper's r_task − w·cost. The 1/(1 + λ) factor only rescales: it
+keeps the return scale bounded while λ grows (episode cost is unbounded), so
+the value loss does not swamp the policy gradient in the shared clipped
+update; the trade-off between task and cost is still set by λ.
 
 PPO-Lagrangian (``budget`` ĉ given): maximise E[return] s.t. E[episode cost] ≤ ĉ.
 The multiplier is updated once per iteration by projected gradient ascent on
@@ -320,6 +324,20 @@ class TrainState:
   iteration: jax.Array  # i32[]
 
 
+def shape_reward(r_task, cost, damage_weight, lam):
+  """Policy reward ``(r_task − (w + λ)·cost) / (1 + λ)``; any matching shapes.
+
+  The division is the usual PPO-Lagrangian normalisation. Episode cost is
+  unbounded (a shattering plate costs thousands of health points), so
+  r − λ·c alone grows with λ: the value loss then dominates the shared,
+  norm-clipped gradient and the policy stops learning (seen on place_plate at
+  λ = 10: value loss ~4e3, no progress in 130 s). Dividing keeps the return
+  scale bounded and leaves the task/cost trade-off (ratio λ) unchanged; with
+  λ = 0 (penalty or task-only runs) it is the paper's r_task − w·cost.
+  """
+  return (r_task - (damage_weight + lam) * cost) / (1.0 + lam)
+
+
 def lagrange_update(lam, episode_cost, budget, lr, lam_max):
   """Projected gradient ascent on the dual: ``clip(λ + lr·(J_c − ĉ), 0, λ_max)``.
 
@@ -507,7 +525,7 @@ class Trainer:
     ts, data, ended = self.collect(ts)
     # Reward shaping with the multiplier the rollout was collected under.
     cost = data.extras["state_extras"]["cost"]  # f32[R·E, T]
-    data = data._replace(reward=data.reward - (sh.damage_weight + ts.lagrange) * cost)
+    data = data._replace(reward=shape_reward(data.reward, cost, sh.damage_weight, ts.lagrange))
     # Mean cost of episodes that ended in this rollout; keep the last estimate if none did.
     n = ended["episodes"]
     any_ended = n > 0
@@ -695,7 +713,7 @@ def train(
 
   Args:
     task: a registered task name (``tasks.make``) or a Brax env tracking damage.
-    damage_weight: w in ``r = r_task − (w + λ)·cost``.
+    damage_weight: w in ``r = (r_task − (w + λ)·cost) / (1 + λ)`` (λ ≡ 0 without a budget).
     budget: episode-cost budget ĉ; enables the Lagrange multiplier λ.
     num_timesteps: training env steps (rounded up to whole iterations).
     eval_every / checkpoint_every: env steps between evaluations / checkpoints
