@@ -88,8 +88,8 @@ def parse(argv):
   p.add_argument("--eval-episodes", type=int, help="deterministic evaluation episodes per run (1024)")
   p.add_argument("--damage-weight", type=float, default=2.0)
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian run")
-  p.add_argument("--lagrange-lr", type=float, default=0.02, help="λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max) per iteration")
-  p.add_argument("--lagrange-max", type=float, default=10.0)
+  p.add_argument("--lagrange-lr", type=float, default=0.1, help="λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max) per iteration")
+  p.add_argument("--lagrange-max", type=float, default=5.0)
   p.add_argument("--obs-mode", default="paper", help="place_plate observation: paper (6-d, fixed goal) or full")
   p.add_argument("--task", default="place_plate",
                  help="another task or env class path (e.g. train.experiments.pusher:PusherEnv for a CPU learning check)")

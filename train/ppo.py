@@ -36,8 +36,12 @@ the dual::
     λ ← clip(λ + lr_λ·(J_c − ĉ), 0, λ_max)
 
 where J_c is the mean undiscounted cost of the episodes that ended during this
-iteration's rollout (the previous estimate when none ended). λ_max only guards
-against a runaway multiplier on an infeasible budget.
+iteration's rollout (the previous estimate when none ended). λ_max guards
+against a runaway multiplier on an infeasible budget. Defaults lr_λ = 0.1,
+λ_max = 5 come from place_plate on one H100 (ĉ = 2, 16384 envs): with 0.02 / 10
+the multiplier saturates at the first, costly episodes and then needs ~150
+iterations to come back down (≥ 80 % safe after 442 s); 0.1 / 5 got there
+after 242 s (benchmarks/results/rl_place_plate_*_lagrangian_fast.md).
 """
 
 from __future__ import annotations
@@ -115,9 +119,9 @@ class PPOConfig:
   normalize_observations: bool = True
   damage_weight: float = 0.0
   budget: Optional[float] = None
-  lagrange_lr: float = 0.02
+  lagrange_lr: float = 0.1
   lagrange_init: float = 0.0
-  lagrange_max: float = 10.0
+  lagrange_max: float = 5.0
   num_eval_envs: int = 128
   eval_every: int = 0  # env steps between evaluations; 0 → only at the end
   checkpoint_every: int = 0  # env steps between checkpoints; 0 → only at the end
@@ -695,9 +699,9 @@ def train(
     batch_size: Optional[int] = None,
     episode_length: Optional[int] = None,
     normalize_observations: bool = True,
-    lagrange_lr: float = 0.02,
+    lagrange_lr: float = 0.1,
     lagrange_init: float = 0.0,
-    lagrange_max: float = 10.0,
+    lagrange_max: float = 5.0,
     num_eval_envs: int = 128,
     eval_every: int = 0,
     checkpoint_every: int = 0,
