@@ -20,6 +20,15 @@ run finishes, to be copied into benchmarks/results/)::
 
     python benchmarks/place_plate_rl.py --total-seconds 470 --results-dir $OUT --work-dir /tmp/rl_runs
 
+Each damage-aware run needs ~4–5 min on one H100, more than one 10-minute device
+call holds for three runs, so the headline table is assembled from runs made by
+separate calls of this script (each row keeps its own command)::
+
+    python benchmarks/place_plate_rl.py --tag headline --combine \
+        task_only=benchmarks/results/rl_place_plate_<device>.json \
+        penalty=benchmarks/results/rl_place_plate_<device>_long_penalty.json \
+        lagrangian=benchmarks/results/rl_place_plate_<device>_lagrangian_fast.json
+
 CPU plumbing/smoke figure (minutes, learns nothing)::
 
     .venv/bin/python benchmarks/place_plate_rl.py --quick
@@ -98,6 +107,8 @@ def parse(argv):
                  help="time rollout vs update (one extra compile; default: on for GPU, off for --quick)")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   p.add_argument("--tag", default="", help="suffix of the result files, e.g. 'long_lagrangian' → rl_<task>_<device>_long_lagrangian.md")
+  p.add_argument("--combine", nargs="+", metavar="RUN=FILE.json",
+                  help="no training: write one table from finished runs of earlier calls (needs --tag)")
   p.add_argument("--work-dir", default=None, help="run directories with checkpoints (default: /tmp/rl_place_plate)")
   args = p.parse_args(argv)
   base = QUICK if args.quick else GPU
@@ -109,6 +120,18 @@ def parse(argv):
   args.runs = [r.strip() for r in args.runs.split(",") if r.strip()]
   if args.tag and not all(c.isalnum() or c in "_-" for c in args.tag):
     p.error(f"--tag: letters, digits, '_' and '-' only, got {args.tag!r}")
+  if args.combine:
+    if not args.tag:
+      p.error("--combine: give --tag for the combined table's file name")
+    pairs = []
+    for item in args.combine:
+      run, sep, path = item.partition("=")
+      if not sep or run not in RUNS:
+        p.error(f"--combine: expected RUN=FILE.json with RUN in {RUNS}, got {item!r}")
+      if not os.path.isfile(path):
+        p.error(f"--combine: {run}: no such file {path!r}")
+      pairs.append((run, path))
+    args.combine = pairs
   bad = [r for r in args.runs if r not in RUNS]
   if bad:
     p.error(f"--runs: unknown {bad}; choose from {RUNS}")
@@ -186,8 +209,38 @@ def write_results(path_base, payload):
     f.write("\n".join(lines))
 
 
+def combine(args, argv=None) -> int:
+  """One results table from runs of earlier calls; each row keeps its source and command."""
+  payload, sources = None, []
+  for run, path in args.combine:
+    with open(path) as f:
+      src = json.load(f)
+    if run not in src["runs"]:
+      raise SystemExit(f"--combine: {path} has no run {run!r} (it has {sorted(src['runs'])})")
+    if payload is None:
+      payload = {k: v for k, v in src.items() if k not in ("runs", "notes", "bottleneck", "script_wall_time_s")}
+      payload.update(runs={}, notes=[], settings={"per_run": {}})
+    elif (src["device"], src["task"], src["eval_episodes"]) != (payload["device"], payload["task"], payload["eval_episodes"]):
+      raise SystemExit(f"--combine: {path} is from another device/task/evaluation size than the first file")
+    payload["runs"][run] = src["runs"][run]
+    payload["settings"]["per_run"][run] = src["settings"]
+    if src.get("bottleneck") and "bottleneck" not in payload:
+      payload["bottleneck"] = src["bottleneck"]
+    sources.append(f"{src['runs'][run]['label']}: `{os.path.basename(path)}`, run on {src['date']} by `{src['command']}`")
+  payload["command"] = " ".join(shlex.quote(a) for a in ["benchmarks/place_plate_rl.py"] + list(sys.argv[1:] if argv is None else argv))
+  payload["date"] = time.strftime("%Y-%m-%d %H:%M")
+  payload["notes"] = ["Rows come from separate calls of this script (one 10-minute device call cannot hold three "
+                      "runs of 4–5 min each); same code path and PPO settings, see 'per_run' above:"] + sources
+  base = os.path.join(args.results_dir, f"rl_{payload['task']}_combined_{args.tag}")
+  write_results(base, payload)
+  print(f"wrote {base}.md / .json", flush=True)
+  return 0
+
+
 def main(argv=None) -> int:
   args = parse(argv)
+  if args.combine:
+    return combine(args, argv)
   t_script = time.perf_counter()
   import jax
 
