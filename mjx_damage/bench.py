@@ -6,7 +6,10 @@ steps) of ``jit(fori_loop(vmap(step)))`` on the K-box table scene
 
 * versus the number of environments, damage on (:func:`mjx_damage.physics.step`)
   and off (:func:`mjx_damage.physics.step_without_damage`), at K tracked boxes;
-* versus the number of tracked entities K, damage on and off, at a fixed batch;
+* versus the number of tracked entities K, damage on and off, at a fixed batch,
+  two ways: K boxes in the scene, all tracked (scene size and tracking grow
+  together), and n of the ``--k`` boxes of one fixed scene tracked (only the
+  damage work grows: what tracking itself costs);
 * the same scene stepped by the reference-style pipeline
   (:mod:`mjx_damage.reference`: native MuJoCo, per-entity Python evaluators),
   native MuJoCo without damage, and multi-threaded ``mujoco.rollout``, in the
@@ -63,9 +66,12 @@ def _table_env_class():
     f32[5]: pusher xy, box 0 xyz (m). Reset jitters every box by ±1 cm.
     """
 
-    def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG"):
-      super().__init__(S.table_scene(k, solver=solver), S.table_config(k), n_substeps)
-      self.k = k
+    def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
+                 tracked: Optional[int] = None, jacobian: str = "auto"):
+      super().__init__(S.table_scene(k, solver=solver, jacobian=jacobian), S.table_config(k, tracked), n_substeps)
+      self.k = k  # boxes in the scene
+      self.tracked = k if tracked is None else tracked  # boxes whose damage is computed
+      self.jacobian = jacobian
       self.radius = S.sweep_radius(k)
       self.episode_length = int(episode_length)
       m = self.mj_model
@@ -111,9 +117,10 @@ def _table_env_class():
   return TableEnv
 
 
-def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG"):
-  """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene."""
-  return _table_env_class()(k, n_substeps, episode_length, solver)
+def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
+              tracked: Optional[int] = None, jacobian: str = "auto"):
+  """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene, tracking ``tracked`` (default all) boxes."""
+  return _table_env_class()(k, n_substeps, episode_length, solver, tracked, jacobian)
 
 
 # --- measurement --------------------------------------------------------------
@@ -223,7 +230,9 @@ def measure_pair(env, envs: int, target_s: float, max_steps: int, repeats: int =
     secs = min(r["times"])
     row = {
         "envs": envs,
-        "entities": env.k,
+        "entities": env.tracked,
+        "boxes": env.k,
+        "jacobian": env.jacobian,
         "damage": damage,
         "steps": steps,
         "seconds": secs,
@@ -342,15 +351,18 @@ def run_benchmark(args) -> dict:
       "notes": list(args.notes),
       "vs_envs": [],
       "vs_entities": [],
+      "vs_tracked": [],
+      "jacobian": args.jacobian,
       "skipped": [],
       "complete": False,  # True once every planned point ran or was skipped
   }
   envs_cache = {}
 
-  def env_for(k):
-    if k not in envs_cache:
-      envs_cache[k] = table_env(k, args.substeps)
-    return envs_cache[k]
+  def env_for(k, tracked=None):
+    key = (k, tracked if tracked != k else None)
+    if key not in envs_cache:
+      envs_cache[key] = table_env(k, args.substeps, tracked=key[1], jacobian=args.jacobian)
+    return envs_cache[key]
 
   done = {}
 
@@ -360,18 +372,20 @@ def run_benchmark(args) -> dict:
     if args.out:
       save(result, args.out)
 
-  def point(k, n, section):
-    key = (k, n)
+  def point(k, n, section, tracked=None):
+    tracked = None if tracked == k else tracked
+    key = (k, n, tracked)
     if key not in done:
       if budget.left() <= 0:
-        result["skipped"].append({"entities": k, "envs": n, "why": "time budget spent"})
+        result["skipped"].append({"entities": tracked or k, "boxes": k, "envs": n, "why": "time budget spent"})
         return
-      print(f"  K={k:>2} envs={n:>5} ...", end="", flush=True)
+      print(f"  K={k:>2} tracked={tracked or k:>2} envs={n:>5} ...", end="", flush=True)
       try:
-        done[key] = measure_pair(env_for(k), n, args.target_s, args.max_steps, args.repeats)
+        done[key] = measure_pair(env_for(k, tracked), n, args.target_s, args.max_steps, args.repeats)
       except Exception as e:  # e.g. device out of memory at the largest batch: keep the rest of the run
         print(f" failed: {type(e).__name__}: {str(e)[:200]}", flush=True)
-        result["skipped"].append({"entities": k, "envs": n, "why": f"{type(e).__name__}: {str(e)[:300]}"})
+        result["skipped"].append({"entities": tracked or k, "boxes": k, "envs": n,
+                                  "why": f"{type(e).__name__}: {str(e)[:300]}"})
         return
       on, off = done[key]
       print(f" on {on['env_steps_per_s']:>11,.1f}  off {off['env_steps_per_s']:>11,.1f} env-steps/s"
@@ -386,12 +400,16 @@ def run_benchmark(args) -> dict:
   top = max(envs_list)
   target_n = args.ratio_envs if args.ratio_envs else top
   first = [(k_main, target_n, "vs_envs"), (1, fixed, "vs_entities"), (k_main, fixed, "vs_entities")]
+  tracked = _parse_ints("--tracked", args.tracked) if args.tracked else []
+  if tracked:  # fixed K-box scene: the all-tracked point is shared with the vs-entities curve
+    first.append((k_main, fixed, "vs_tracked", min(tracked)))
   ent_pts = [(k, fixed, "vs_entities") for k in ents if (k, fixed, "vs_entities") not in first]
   env_pts = [(k_main, n, "vs_envs") for n in envs_list if (k_main, n, "vs_envs") not in first]
-  # alternate the two curves so a spent budget thins both evenly
+  trk_pts = [(k_main, fixed, "vs_tracked", t) for t in tracked if (k_main, fixed, "vs_tracked", t) not in first]
+  # alternate the curves so a spent budget thins them evenly
   rest = []
-  for i in range(max(len(ent_pts), len(env_pts))):
-    rest += ent_pts[i:i + 1] + env_pts[i:i + 1]
+  for i in range(max(len(ent_pts), len(env_pts), len(trk_pts))):
+    rest += ent_pts[i:i + 1] + env_pts[i:i + 1] + trk_pts[i:i + 1]
   # reference-style pipeline on the same scene (CPU, single thread, Python evaluators);
   # bounded by --ref-max-s per configuration, so it runs before the budgeted points
   ref = {}
@@ -448,6 +466,14 @@ def summarize(result: dict, k_main: int, target_n: int, fixed: int) -> dict:
   """Ratios the project reports against its targets (computed from this run's rows only)."""
   rows = result["vs_envs"] + result["vs_entities"]
   s = {}
+  trk = result.get("vs_tracked", [])
+  lo = min((r["entities"] for r in trk), default=None)
+  for dmg in (True, False):
+    a = _lookup(trk, entities=lo, envs=fixed, damage=dmg)
+    b = _lookup(trk, entities=k_main, envs=fixed, damage=dmg)
+    if a and b and lo != k_main:
+      s[f"tracked_{k_main}_over_{lo}_in_{k_main}_box_scene_damage_{'on' if dmg else 'off'}_{fixed}envs"] = (
+          b["env_steps_per_s"] / a["env_steps_per_s"])
   on = _lookup(rows, entities=k_main, envs=target_n, damage=True)
   off = _lookup(rows, entities=k_main, envs=target_n, damage=False)
   if on and off:
@@ -497,11 +523,15 @@ def report_md(result: dict) -> str:
   lines += [f"- note: {n}" for n in result.get("notes", [])]
   lines += ["", f"One env step = {result['n_substeps']} physics steps of {result['timestep_s'] * 1e3:g} ms. "
             "Scene: " + result["scene"] + ".", ""]
-  for section, title in (("vs_envs", "Versus environments"), ("vs_entities", "Versus tracked entities")):
-    lines += [f"## {title}", "", "| K tracked | envs | damage | env steps/s | physics steps/s | compile s |"
-              " peak host RSS GB | load avg |", "|---:|---:|---|---:|---:|---:|---:|---:|"]
+  for section, title in (("vs_envs", "Versus environments"),
+                         ("vs_entities", "Versus tracked entities: K boxes in the scene, all tracked"),
+                         ("vs_tracked", "Versus tracked entities: a fixed scene, n of its boxes tracked")):
+    if not result.get(section):
+      continue
+    lines += [f"## {title}", "", "| tracked | boxes in scene | envs | damage | env steps/s | physics steps/s | compile s |"
+              " peak host RSS GB | load avg |", "|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
     for r in sorted(result[section], key=lambda r: (r["entities"], r["envs"], not r["damage"])):
-      lines.append(f"| {r['entities']} | {r['envs']} | {'on' if r['damage'] else 'off'} | {r['env_steps_per_s']:,.0f} |"
+      lines.append(f"| {r['entities']} | {r.get('boxes', r['entities'])} | {r['envs']} | {'on' if r['damage'] else 'off'} | {r['env_steps_per_s']:,.0f} |"
                    f" {r['physics_steps_per_s']:,.0f} | {r['compile_s']:.1f} | {r['host_maxrss_bytes'] / 2**30:.2f} |"
                    f" {r.get('loadavg_1min', float('nan')):.1f} |")
     lines.append("")
@@ -549,7 +579,9 @@ def plot(result: dict, path: str) -> None:
   matplotlib.use("Agg")
   import matplotlib.pyplot as plt
 
-  fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
+  trk = result.get("vs_tracked", [])
+  fig, axes = plt.subplots(1, 3 if trk else 2, figsize=(18 if trk else 12, 4.5))
+  a, b = axes[0], axes[1]
   settings = sorted({(r["entities"], r["damage"]) for r in result["vs_envs"]})
   for k, dmg in settings:
     rows = sorted((r for r in result["vs_envs"] if r["entities"] == k and r["damage"] == dmg), key=lambda r: r["envs"])
@@ -567,9 +599,19 @@ def plot(result: dict, path: str) -> None:
     if rows:
       b.plot([r["entities"] for r in rows], [r["env_steps_per_s"] for r in rows], "o-" if dmg else "s--",
              label=f"damage {'on' if dmg else 'off'} ({rows[0]['envs']} envs)")
-  b.set(xscale="log", yscale="log", xlabel="tracked entities (damageable free boxes)", ylabel="env steps / s",
-        title="throughput vs tracked entities")
+  b.set(xscale="log", yscale="log", xlabel="tracked entities = free boxes in the scene", ylabel="env steps / s",
+        title="throughput vs tracked entities (scene grows)")
   b.legend(fontsize=8)
+  if trk:
+    c = axes[2]
+    for dmg in (True, False):
+      rows = sorted((r for r in trk if r["damage"] == dmg), key=lambda r: r["entities"])
+      c.plot([r["entities"] for r in rows], [r["env_steps_per_s"] for r in rows], "o-" if dmg else "s--",
+             label=f"damage {'on' if dmg else 'off'} ({rows[0]['envs']} envs)")
+    c.set(xscale="log", yscale="log", xlabel=f"tracked entities of {trk[0].get('boxes')} boxes in the scene",
+          ylabel="env steps / s", title="throughput vs tracked entities (fixed scene)")
+    c.set_ylim(min(r["env_steps_per_s"] for r in trk) / 3, max(r["env_steps_per_s"] for r in trk) * 3)
+    c.legend(fontsize=8)
   fig.tight_layout()
   fig.savefig(path, dpi=120)
   plt.close(fig)
@@ -579,7 +621,12 @@ def build_parser() -> argparse.ArgumentParser:
   ap = argparse.ArgumentParser(prog="mjx-damage bench", description=__doc__.split("\n\n")[0])
   ap.add_argument("--envs", default=None, help="comma-separated batch sizes (default: CPU 1..2048, GPU 1..16384)")
   ap.add_argument("--entities", default=",".join(map(str, ENTITIES)), help="tracked-entity counts K")
-  ap.add_argument("--k", type=int, default=32, help="tracked boxes for the vs-envs curve (default 32)")
+  ap.add_argument("--k", type=int, default=32, help="boxes (all tracked) for the vs-envs curve and in the fixed"
+                  " scene of the vs-tracked curve (default 32)")
+  ap.add_argument("--tracked", default=",".join(map(str, ENTITIES)),
+                  help="tracked-box counts n in the fixed --k-box scene ('' to skip)")
+  ap.add_argument("--jacobian", default="auto", choices=("auto", "dense", "sparse"),
+                  help="MuJoCo <option jacobian> of the bench scene (auto: MJX goes sparse from nv >= 60)")
   ap.add_argument("--entity-envs", type=int, default=None, help="batch of the vs-entities curve")
   ap.add_argument("--ratio-envs", type=int, default=None, help="batch of the on/off ratio (CPU 1024, GPU 8192)")
   ap.add_argument("--substeps", type=int, default=5, help="physics steps per env step (default 5)")
@@ -612,6 +659,10 @@ def main(argv=None) -> int:
   try:
     envs = _parse_ints("--envs", args.envs)
     _parse_ints("--entities", args.entities)
+    if args.tracked:
+      big = [t for t in _parse_ints("--tracked", args.tracked) if t > args.k]
+      if big:
+        raise ValueError(f"--tracked: counts {big} exceed the --k={args.k} boxes of the scene")
     for name in ("k", "entity_envs", "ratio_envs", "substeps", "max_steps", "ref_envs", "ref_steps", "task_envs",
                  "repeats"):
       if getattr(args, name) < 1:

@@ -96,6 +96,8 @@ def test_summary_and_plot(tmp_path):
   result = {"device": "cpu", "platform": "cpu", "num_devices": 1, "command": "x", "date": "d", "n_substeps": 5,
             "timestep_s": 0.004, "scene": "s", "vs_envs": [r for r in rows if r["entities"] == 4],
             "vs_entities": [r for r in rows if r["envs"] == 8],
+            "vs_tracked": [dict(r, boxes=4, env_steps_per_s=r["env_steps_per_s"] * r["entities"] * (0.9 if r["entities"] == 4 else 1))
+                           for r in rows if r["envs"] == 8],
             "reference": {"4": {"reference_damage": {"env_steps_per_s": 1.0, "envs": 1, "physics_steps_per_s": 5.0},
                                 "native_no_damage": {"env_steps_per_s": 4.0, "envs": 1, "physics_steps_per_s": 20.0},
                                 "rollout_no_damage": {"env_steps_per_s": 8.0, "envs": 1, "physics_steps_per_s": 40.0, "threads": 2}}}}
@@ -103,9 +105,11 @@ def test_summary_and_plot(tmp_path):
   assert s["damage_on_off_ratio_K4_8envs"] == pytest.approx(2 / 2.1)
   assert s["entities_4_over_1_throughput_damage_on_8envs"] == pytest.approx(0.25)
   assert s["speedup_over_reference_K4"]["ratio_vs_reference_damage"] == pytest.approx(4.0)
+  assert s["tracked_4_over_1_in_4_box_scene_damage_on_8envs"] == pytest.approx(0.9)
   result["summary"] = s
   md = bench.report_md(result)
-  assert "| 4 | 8 | on | 4 |" in md and "ratio_vs_reference_damage" in md
+  assert "| 4 | 4 | 8 | on | 4 |" in md and "ratio_vs_reference_damage" in md
+  assert "a fixed scene, n of its boxes tracked" in md
   bench.plot(result, str(tmp_path / "p.png"))
   assert (tmp_path / "p.png").stat().st_size > 1000
 
@@ -114,14 +118,27 @@ def test_bench_cli_rejects_bad_sizes(capsys):
   with pytest.raises(SystemExit):
     bench.main(["--envs", "0,4"])
   assert "--envs:" in capsys.readouterr().err
+  with pytest.raises(SystemExit):
+    bench.main(["--k", "4", "--tracked", "1,8"])
+  assert "--tracked:" in capsys.readouterr().err
+
+
+def test_tracked_subset_of_a_fixed_scene():
+  with pytest.raises(ValueError, match="tracked"):
+    S.table_config(4, tracked=5)
+  with pytest.raises(ValueError, match="jacobian"):
+    S.table_scene_xml(2, jacobian="banded")
+  env = bench.table_env(4, tracked=2, jacobian="dense")
+  assert env.mj_model.nbody == 1 + 1 + 4 and len(env.damage_binding.entity_names) == 2
 
 
 @pytest.mark.slow
 def test_bench_end_to_end(tmp_path):
   out = tmp_path / "b.json"
-  assert bench.main(["--envs", "2", "--entities", "1,2", "--k", "2", "--entity-envs", "2", "--ratio-envs", "2",
+  assert bench.main(["--envs", "2", "--entities", "1,2", "--tracked", "1,2", "--k", "2", "--entity-envs", "2", "--ratio-envs", "2",
                      "--target-s", "0.2", "--max-steps", "3", "--ref-envs", "1", "--ref-steps", "2",
                      "--task", "", "--out", str(out)]) == 0
   res = json.loads(out.read_text())
   assert res["summary"]["damage_on_off_ratio_K2_2envs"] > 0
+  assert res["summary"]["tracked_2_over_1_in_2_box_scene_damage_on_2envs"] > 0
   assert (tmp_path / "b.png").exists()

@@ -47,17 +47,25 @@ def sweep_radius(k: int) -> float:
   return max(0.08, (cols - 1) / 2 * SPACING + 0.02)
 
 
+JACOBIANS = ("auto", "dense", "sparse")
+
+
 def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_iterations: int = 8,
-                    solver: str = "CG") -> str:
+                    solver: str = "CG", jacobian: str = "auto") -> str:
   """MJCF text of the K-box scene (k >= 1).
 
   Solver iterations are kept small (MJX's recommendation for throughput); the
   same XML feeds the native-MuJoCo reference, so both solve the same problem.
+  ``jacobian`` is MuJoCo's ``<option jacobian>``: with "auto" MJX switches to
+  sparse mass matrices from nv >= 60 (K >= 10 here), which its own docs say
+  GPUs tend to run slower than dense.
   """
   if not isinstance(k, int) or isinstance(k, bool) or k < 1:
     raise ValueError(f"k: number of boxes must be an int >= 1, got {k!r}")
   if solver not in ("CG", "Newton"):
     raise ValueError(f"solver: must be 'CG' or 'Newton', got {solver!r}")
+  if jacobian not in JACOBIANS:
+    raise ValueError(f"jacobian: must be one of {JACOBIANS}, got {jacobian!r}")
   boxes = []
   for i, (x, y) in enumerate(grid_xy(k)):
     boxes.append(
@@ -69,7 +77,7 @@ def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_ite
     )
   r = sweep_radius(k) + 0.2
   return f"""<mujoco model="bench_table_{k}">
-  <option timestep="{timestep}" integrator="implicitfast" solver="{solver}" iterations="{iterations}" ls_iterations="{ls_iterations}"/>
+  <option timestep="{timestep}" integrator="implicitfast" solver="{solver}" iterations="{iterations}" ls_iterations="{ls_iterations}" jacobian="{jacobian}"/>
   <default><geom friction="0.8 0.01 0.001"/></default>
   <worldbody>
     <light pos="0 0 2" dir="0 0 -1"/>
@@ -94,6 +102,16 @@ def table_scene(k: int, **kw) -> mujoco.MjModel:
   return mujoco.MjModel.from_xml_string(table_scene_xml(k, **kw))
 
 
-def table_config(k: int) -> dict:
-  """Damage config tracking the K boxes (entity ``box{i}`` = body ``box{i}``)."""
-  return {"entities": {f"box{i}": {"params": BOX_PARAMS, "bodies": [f"box{i}"]} for i in range(k)}}
+def table_config(k: int, tracked: int | None = None) -> dict:
+  """Damage config of the K boxes (entity ``box{i}`` = body ``box{i}``).
+
+  ``tracked``: track only boxes 0..tracked−1 (default: all K). The scene stays
+  the same, so varying it isolates what tracking costs from what the physics
+  of more bodies costs.
+  """
+  cfg = {"entities": {f"box{i}": {"params": BOX_PARAMS, "bodies": [f"box{i}"]} for i in range(k)}}
+  if tracked is not None:
+    if not isinstance(tracked, int) or isinstance(tracked, bool) or not 1 <= tracked <= k:
+      raise ValueError(f"tracked: must be an int in [1, k={k}], got {tracked!r}")
+    cfg["track"] = [f"box{i}" for i in range(tracked)]
+  return cfg
