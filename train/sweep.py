@@ -62,8 +62,12 @@ def check_sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[i
 
 def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], fragility: Sequence[float],
           episodes: int, safe_threshold: float = 95.0, episode_length: Optional[int] = None,
-          devices=None, log=print) -> dict:
-  """Run the sweep; returns {"rows": aggregated rows, "runs": per-seed rows, "compiles": {...}}."""
+          devices=None, log=print, on_progress=None) -> dict:
+  """Run the sweep; returns {"rows": aggregated rows, "runs": per-seed rows, "compiles": {...}}.
+
+  ``on_progress(partial_result)`` is called after every (task, policy), so a
+  long sweep that is interrupted keeps what it finished.
+  """
   check_sweep(tasks, policies, seeds, fragility, episodes, safe_threshold)
   levels = np.asarray(fragility, np.float32)
   frag = np.repeat(levels, episodes)  # [levels × episodes]
@@ -89,6 +93,8 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
           f"x {T} steps in {time.perf_counter() - t0:.1f} s, {ev.num_compiled} executable(s)")
       for f, ms in per_level.items():
         rows.append(aggregate(task, spec, f, ms))
+      if on_progress is not None:
+        on_progress({"rows": rows, "runs": runs, "compiles": compiles})
   return {"rows": rows, "runs": runs, "compiles": compiles}
 
 
@@ -165,25 +171,35 @@ def main(argv=None) -> int:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
   except ValueError as e:
     ap.error(str(e))
+  import jax
+
   t0 = time.perf_counter()
-  res = sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length)
-  md = markdown(res["rows"], args.safe_threshold)
-  print("\n" + md)
-  out = {
-      "command": "mjx-damage sweep " + " ".join(argv),
-      "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-      "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
-      "episodes": args.episodes, "safe_threshold": args.safe_threshold,
-      "executables_compiled": res["compiles"],
-      "wall_s": time.perf_counter() - t0,
-      "rows": res["rows"], "runs": res["runs"],
-  }
-  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-  with open(args.out, "w") as f:
-    json.dump(out, f, indent=1)
   md_path = os.path.splitext(args.out)[0] + ".md"
-  with open(md_path, "w") as f:
-    f.write(f"Command: `{out['command']}`\n\n" + md)
+  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+
+  def write(res, complete):
+    out = {
+        "command": "mjx-damage sweep " + " ".join(argv),
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
+        "num_devices": jax.device_count(),  # evaluation shards episodes over all of them
+        "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
+        "episodes": args.episodes, "safe_threshold": args.safe_threshold,
+        "executables_compiled": res["compiles"],
+        "wall_s": time.perf_counter() - t0, "complete": complete,
+        "rows": res["rows"], "runs": res["runs"],
+    }
+    with open(args.out, "w") as f:
+      json.dump(out, f, indent=1)
+    md = markdown(res["rows"], args.safe_threshold)
+    with open(md_path, "w") as f:
+      head = f"Command: `{out['command']}`\n\nDevice: {out['device']} x {out['num_devices']}; wall {out['wall_s']:.0f} s"
+      f.write(head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
+    return md
+
+  res = sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
+              on_progress=lambda r: write(r, False))
+  print("\n" + write(res, True))
   print(f"wrote {args.out} and {md_path}")
   return 0
 
