@@ -15,16 +15,18 @@ with env-steps, wall-clock, training throughput, a time breakdown (compile,
 training iterations, evaluation, checkpoint, host) and — with ``--profile`` —
 rollout vs update time per iteration.
 
-GPU (one H100; all three runs in one command of < 9 min; results land in $OUT as each
-run finishes, to be copied into benchmarks/results/)::
+GPU (one H100): one call per run, results in $OUT as each run finishes, to be copied
+into benchmarks/results/ (each row of the committed table records the exact command it came from)::
 
-    python benchmarks/place_plate_rl.py --total-seconds 470 --results-dir $OUT --work-dir /tmp/rl_runs
+    python benchmarks/place_plate_rl.py --runs task_only --budget-seconds 170 --results-dir $OUT
+    python benchmarks/place_plate_rl.py --runs penalty --budget-seconds 300 --tag long_penalty --results-dir $OUT
+    python benchmarks/place_plate_rl.py --runs lagrangian --budget-seconds 420 --tag lagrangian_fast --results-dir $OUT
 
 Each damage-aware run needs ~4–5 min on one H100, more than one 10-minute device
 call holds for three runs, so the headline table is assembled from runs made by
 separate calls of this script (each row keeps its own command)::
 
-    python benchmarks/place_plate_rl.py --tag headline --combine \
+    python benchmarks/place_plate_rl.py --tag h100 --combine \
         task_only=benchmarks/results/rl_place_plate_<device>.json \
         penalty=benchmarks/results/rl_place_plate_<device>_long_penalty.json \
         lagrangian=benchmarks/results/rl_place_plate_<device>_lagrangian_fast.json
