@@ -358,8 +358,8 @@ def run_benchmark(args) -> dict:
   }
   envs_cache = {}
 
-  def env_for(k, tracked=None):
-    key = (k, tracked if tracked != k else None)
+  def env_for(k, tracked=None):  # tracked: None = all K (point() normalises tracked == k to None)
+    key = (k, tracked)
     if key not in envs_cache:
       envs_cache[key] = table_env(k, args.substeps, tracked=key[1], jacobian=args.jacobian)
     return envs_cache[key]
@@ -632,6 +632,8 @@ def plot(result: dict, path: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+  from mjx_damage.scenes import bench_table as S
+
   ap = argparse.ArgumentParser(prog="mjx-damage bench", description=__doc__.split("\n\n")[0])
   ap.add_argument("--envs", default=None, help="comma-separated batch sizes (default: CPU 1..2048, GPU 1..16384)")
   ap.add_argument("--entities", default=",".join(map(str, ENTITIES)), help="tracked-entity counts K")
@@ -639,7 +641,7 @@ def build_parser() -> argparse.ArgumentParser:
                   " scene of the vs-tracked curve (default 32)")
   ap.add_argument("--tracked", default=",".join(map(str, ENTITIES)),
                   help="tracked-box counts n in the fixed --k-box scene ('' to skip)")
-  ap.add_argument("--jacobian", default="auto", choices=("auto", "dense", "sparse"),
+  ap.add_argument("--jacobian", default="auto", choices=S.JACOBIANS,
                   help="MuJoCo <option jacobian> of the bench scene (auto: MJX goes sparse from nv >= 60)")
   ap.add_argument("--entity-envs", type=int, default=None, help="batch of the vs-entities curve")
   ap.add_argument("--ratio-envs", type=int, default=None, help="batch of the on/off ratio (CPU 1024, GPU 8192)")
