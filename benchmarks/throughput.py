@@ -22,21 +22,22 @@ SETTINGS = {
     # in the project XLA's CPU runtime hung on some large-batch runs (all threads idle
     # in futex waits); the run saves after every point, so a hang keeps what finished.
     "cpu": [
-        "--envs", "1,16,128,1024,2048", "--entities", "1,32", "--tracked", "1,32", "--k", "32",
+        "--envs", "1,16,128,1024,2048", "--entities", "1,32", "--tracked", "1,32", "--mounted", "1,32", "--k", "32",
         "--ratio-envs", "1024", "--entity-envs", "1024", "--target-s", "3", "--repeats", "2", "--max-steps", "40",
         "--ref-envs", "4", "--ref-steps", "25", "--ref-max-s", "10", "--task", "",
         "--budget-s", "1100",
-        "--note", "CPU: K = 1 and 32 on the two entity axes (not 1..32) so the run fits ~15 min on 2 cores",
+        "--note", "CPU: K = 1 and 32 on the three entity axes (not 1..32) so the run fits ~15 min on 2 cores",
         "--note", "CPU: place_plate task throughput not timed here (see benchmarks/results/sweep_cpu.json wall time); it is a GPU target",
         "--note", "CPU: the machine is shared with other engineers' jobs; loadavg_1min per point shows the contention; "
                   "timings of identical work vary by ~20 % between points here",
     ],
     "gpu": [
-        "--envs", "1,256,2048,8192,16384", "--entities", "1,16,32,2,4,8", "--tracked", "1,2,4,8,16,32", "--k", "32",
+        "--envs", "1,256,2048,8192,16384", "--entities", "1,16,32,2,4,8", "--tracked", "1,2,4,8,16,32",
+        "--mounted", "1,2,4,8,16,32", "--k", "32",
         "--ratio-envs", "8192", "--entity-envs", "8192", "--target-s", "1.5", "--repeats", "2",
         "--max-steps", "500", "--ref-envs", "4", "--ref-steps", "25", "--ref-max-s", "5",
-        "--task", "place_plate", "--task-envs", "32768", "--budget-s", "470",
-        "--note", "GPU: 5 batch sizes x 6 entity counts x 2 entity axes (each an XLA compile, damage on and off) "
+        "--task", "place_plate", "--task-envs", "32768", "--budget-s", "520",
+        "--note", "GPU: 5 batch sizes x 6 entity counts x 3 entity axes (each an XLA compile, damage on and off) "
                   "within one 10-minute device call; points the budget could not reach are listed under 'skipped'",
     ],
 }

@@ -62,20 +62,28 @@ def _table_env_class():
   class TableEnv(DamageEnv):
     """K boxes on a table and a pusher; action f32[2] ∈ [−1, 1]² = pusher target / sweep radius.
 
+    ``free`` boxes (default all K) have free joints, the rest are mounted
+    (:func:`mjx_damage.scenes.bench_table.table_scene_xml`); box 0 is always free.
+
     Success: box 0 pushed more than 5 cm from where it started. Observation
     f32[5]: pusher xy, box 0 xyz (m). Reset jitters every box by ±1 cm.
     """
 
     def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
-                 tracked: Optional[int] = None, jacobian: str = "auto"):
-      super().__init__(S.table_scene(k, solver=solver, jacobian=jacobian), S.table_config(k, tracked), n_substeps)
+                 tracked: Optional[int] = None, jacobian: str = "auto", free: Optional[int] = None):
+      free = k if free is None else free
+      if not isinstance(free, int) or isinstance(free, bool) or not 1 <= free <= k:
+        raise ValueError(f"free: free boxes must be an int in [1, k={k}] (box 0 is observed), got {free!r}")
+      super().__init__(S.table_scene(k, solver=solver, jacobian=jacobian, free=free), S.table_config(k, tracked),
+                       n_substeps)
       self.k = k  # boxes in the scene
+      self.free = free  # boxes 0..free-1 are free bodies, the rest mounted
       self.tracked = k if tracked is None else tracked  # boxes whose damage is computed
       self.jacobian = jacobian
       self.radius = S.sweep_radius(k)
       self.episode_length = int(episode_length)
       m = self.mj_model
-      self._box_q = np.array([m.jnt_qposadr[m.joint(f"box{i}").id] for i in range(k)])
+      self._box_q = np.array([m.jnt_qposadr[m.joint(f"box{i}").id] for i in range(free)])
       self._qpos0 = np.array(m.qpos0, np.float32)
 
     @property
@@ -87,8 +95,8 @@ def _table_env_class():
       return 2
 
     def initial_qpos(self, rng) -> jax.Array:
-      """f32[nq] reset configuration: boxes on their grid, jittered ±1 cm in x and y."""
-      jit = jax.random.uniform(rng, (self.k, 2), minval=-0.01, maxval=0.01)
+      """f32[nq] reset configuration: free boxes on their grid, jittered ±1 cm in x and y."""
+      jit = jax.random.uniform(rng, (self.free, 2), minval=-0.01, maxval=0.01)
       q = jnp.asarray(self._qpos0)
       idx = jnp.asarray(self._box_q)
       return q.at[idx].add(jit[:, 0]).at[idx + 1].add(jit[:, 1])
@@ -118,9 +126,10 @@ def _table_env_class():
 
 
 def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
-              tracked: Optional[int] = None, jacobian: str = "auto"):
-  """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene, tracking ``tracked`` (default all) boxes."""
-  return _table_env_class()(k, n_substeps, episode_length, solver, tracked, jacobian)
+              tracked: Optional[int] = None, jacobian: str = "auto", free: Optional[int] = None):
+  """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene, tracking ``tracked`` (default all) boxes,
+  ``free`` (default all) of them free bodies and the rest mounted."""
+  return _table_env_class()(k, n_substeps, episode_length, solver, tracked, jacobian, free)
 
 
 # --- measurement --------------------------------------------------------------
@@ -232,6 +241,7 @@ def measure_pair(env, envs: int, target_s: float, max_steps: int, repeats: int =
         "envs": envs,
         "entities": env.tracked,
         "boxes": env.k,
+        "free_boxes": env.free,
         "jacobian": env.jacobian,
         "damage": damage,
         "steps": steps,
@@ -343,7 +353,8 @@ def run_benchmark(args) -> dict:
       "host": {"machine": platform.machine(), "cpus": os.cpu_count(), "python": sys.version.split()[0]},
       "versions": {"jax": jax.__version__, "mujoco": __import__("mujoco").__version__},
       "scene": "mjx_damage.scenes.bench_table: K free boxes (tracked, 'default' params) on a table plane,"
-      " a sphere pusher on slide joints; boxes collide with table and pusher, never with each other",
+      " a sphere pusher on slide joints; boxes collide with table and pusher, never with each other;"
+      " in the vs_mounted scenes box 0 is free and boxes 1..K-1 are mounted (no joint)",
       "n_substeps": args.substeps,
       "timestep_s": 0.004,
       "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache and
@@ -352,16 +363,17 @@ def run_benchmark(args) -> dict:
       "vs_envs": [],
       "vs_entities": [],
       "vs_tracked": [],
+      "vs_mounted": [],
       "jacobian": args.jacobian,
       "skipped": [],
       "complete": False,  # True once every planned point ran or was skipped
   }
   envs_cache = {}
 
-  def env_for(k, tracked=None):  # tracked: None = all K (point() normalises tracked == k to None)
-    key = (k, tracked)
+  def env_for(k, tracked=None, free=None):  # None = all K (point() normalises tracked/free == k to None)
+    key = (k, tracked, free)
     if key not in envs_cache:
-      envs_cache[key] = table_env(k, args.substeps, tracked=key[1], jacobian=args.jacobian)
+      envs_cache[key] = table_env(k, args.substeps, tracked=tracked, jacobian=args.jacobian, free=free)
     return envs_cache[key]
 
   done = {}
@@ -372,19 +384,21 @@ def run_benchmark(args) -> dict:
     if args.out:
       save(result, args.out)
 
-  def point(k, n, section, tracked=None):
+  def point(k, n, section, tracked=None, free=None):
     tracked = None if tracked == k else tracked
-    key = (k, n, tracked)
+    free = None if free == k else free
+    key = (k, n, tracked, free)
     if key not in done:
       if budget.left() <= 0:
-        result["skipped"].append({"entities": tracked or k, "boxes": k, "envs": n, "why": "time budget spent"})
+        result["skipped"].append({"entities": tracked or k, "boxes": k, "free_boxes": free or k, "envs": n,
+                                  "why": "time budget spent"})
         return
-      print(f"  K={k:>2} tracked={tracked or k:>2} envs={n:>5} ...", end="", flush=True)
+      print(f"  K={k:>2} tracked={tracked or k:>2} free={free or k:>2} envs={n:>5} ...", end="", flush=True)
       try:
-        done[key] = measure_pair(env_for(k, tracked), n, args.target_s, args.max_steps, args.repeats)
+        done[key] = measure_pair(env_for(k, tracked, free), n, args.target_s, args.max_steps, args.repeats)
       except Exception as e:  # e.g. device out of memory at the largest batch: keep the rest of the run
         print(f" failed: {type(e).__name__}: {str(e)[:200]}", flush=True)
-        result["skipped"].append({"entities": tracked or k, "boxes": k, "envs": n,
+        result["skipped"].append({"entities": tracked or k, "boxes": k, "free_boxes": free or k, "envs": n,
                                   "why": f"{type(e).__name__}: {str(e)[:300]}"})
         return
       on, off = done[key]
@@ -403,13 +417,17 @@ def run_benchmark(args) -> dict:
   tracked = _parse_ints("--tracked", args.tracked) if args.tracked else []
   if tracked:  # fixed K-box scene: the all-tracked point is shared with the vs-entities curve
     first.append((k_main, fixed, "vs_tracked", min(tracked)))
+  mounted = _parse_ints("--mounted", args.mounted) if args.mounted else []
+  if mounted:  # 1 free box + K-1 mounted ones; K = 1 is the vs-entities scene itself
+    first += [(1, fixed, "vs_mounted", None, 1), (max(mounted), fixed, "vs_mounted", None, 1)]
   ent_pts = [(k, fixed, "vs_entities") for k in ents if (k, fixed, "vs_entities") not in first]
   env_pts = [(k_main, n, "vs_envs") for n in envs_list if (k_main, n, "vs_envs") not in first]
   trk_pts = [(k_main, fixed, "vs_tracked", t) for t in tracked if (k_main, fixed, "vs_tracked", t) not in first]
+  mnt_pts = [(k, fixed, "vs_mounted", None, 1) for k in mounted if (k, fixed, "vs_mounted", None, 1) not in first]
   # alternate the curves so a spent budget thins them evenly
   rest = []
-  for i in range(max(len(ent_pts), len(env_pts), len(trk_pts))):
-    rest += ent_pts[i:i + 1] + env_pts[i:i + 1] + trk_pts[i:i + 1]
+  for i in range(max(len(ent_pts), len(env_pts), len(trk_pts), len(mnt_pts))):
+    rest += ent_pts[i:i + 1] + env_pts[i:i + 1] + trk_pts[i:i + 1] + mnt_pts[i:i + 1]
   # reference-style pipeline on the same scene (CPU, single thread, Python evaluators);
   # bounded by --ref-max-s per configuration, so it runs before the budgeted points
   ref = {}
@@ -474,6 +492,14 @@ def summarize(result: dict, k_main: int, target_n: int, fixed: int) -> dict:
     if a and b and lo != k_main:
       s[f"tracked_{k_main}_over_{lo}_in_{k_main}_box_scene_damage_{'on' if dmg else 'off'}_{fixed}envs"] = (
           b["env_steps_per_s"] / a["env_steps_per_s"])
+  mnt = result.get("vs_mounted", [])
+  top = max((r["entities"] for r in mnt), default=None)
+  for dmg in (True, False):
+    a = _lookup(mnt, entities=1, envs=fixed, damage=dmg)
+    b = _lookup(mnt, entities=top, envs=fixed, damage=dmg)
+    if a and b and top != 1:
+      s[f"entities_{top}_over_1_mounted_throughput_damage_{'on' if dmg else 'off'}_{fixed}envs"] = (
+          b["env_steps_per_s"] / a["env_steps_per_s"])
   on = _lookup(rows, entities=k_main, envs=target_n, damage=True)
   off = _lookup(rows, entities=k_main, envs=target_n, damage=False)
   if on and off:
@@ -525,13 +551,16 @@ def report_md(result: dict) -> str:
             "Scene: " + result["scene"] + ".", ""]
   for section, title in (("vs_envs", "Versus environments"),
                          ("vs_entities", "Versus tracked entities: K boxes in the scene, all tracked"),
-                         ("vs_tracked", "Versus tracked entities: a fixed scene, n of its boxes tracked")):
+                         ("vs_tracked", "Versus tracked entities: a fixed scene, n of its boxes tracked"),
+                         ("vs_mounted", "Versus tracked entities: the scene grows by mounted boxes (1 free box + K-1 "
+                                        "mounted, all tracked)")):
     if not result.get(section):
       continue
-    lines += [f"## {title}", "", "| tracked | boxes in scene | envs | damage | env steps/s | physics steps/s | compile s |"
-              " peak host RSS GB | load avg |", "|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
+    lines += [f"## {title}", "", "| tracked | boxes in scene | free boxes | envs | damage | env steps/s | physics steps/s |"
+              " compile s | peak host RSS GB | load avg |", "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
     for r in sorted(result[section], key=lambda r: (r["entities"], r["envs"], not r["damage"])):
-      lines.append(f"| {r['entities']} | {r.get('boxes', r['entities'])} | {r['envs']} | {'on' if r['damage'] else 'off'} | {r['env_steps_per_s']:,.0f} |"
+      boxes = r.get("boxes", r["entities"])
+      lines.append(f"| {r['entities']} | {boxes} | {r.get('free_boxes', boxes)} | {r['envs']} | {'on' if r['damage'] else 'off'} | {r['env_steps_per_s']:,.0f} |"
                    f" {r['physics_steps_per_s']:,.0f} | {r['compile_s']:.1f} | {r['host_maxrss_bytes'] / 2**30:.2f} |"
                    f" {r.get('loadavg_1min', float('nan')):.1f} |")
     lines.append("")
@@ -558,16 +587,30 @@ def report_md(result: dict) -> str:
           f"{sp['ratio_vs_rollout_no_damage']:.2f}x mujoco.rollout without damage "
           f"({result['reference'][k]['rollout_no_damage']['threads']} threads).")
   summ = result["summary"]
-  grow = [(k, v) for k, v in summ.items() if k.startswith("entities_") and "_damage_on_" in k]
+  grow = [(k, v) for k, v in summ.items()
+          if k.startswith("entities_") and "_damage_on_" in k and "_mounted_" not in k]
   fixed = [(k, v) for k, v in summ.items() if k.startswith("tracked_") and "_damage_on_" in k]
   if grow and fixed:
-    off = [v for k, v in summ.items() if k.startswith("entities_") and "_damage_off_" in k]
+    off = [v for k, v in summ.items()
+           if k.startswith("entities_") and "_damage_off_" in k and "_mounted_" not in k]
     reading.append(
         f"- Tracked entities: in one fixed scene, tracking all its boxes instead of one keeps {fixed[0][1]:.0%} of "
         f"the throughput — what damage tracking itself costs. Growing the scene with the tracked boxes keeps "
         f"{grow[0][1]:.1%} (damage off: {off[0] if off else float('nan'):.1%}): that is the physics of more free "
-        "bodies in MJX's JAX implementation (dense constraint Jacobian, nefc x nv, both growing with K), not the "
-        "damage; `benchmarks/entity_scaling.py` breaks the step down by stage.")
+        "bodies, not the damage. Each free box adds 6 dofs and 5 contacts to a scene whose fixed part is a 2-dof "
+        "pusher, and MJX's JAX implementation makes every step's constraint work grow faster than K (a dense "
+        "constraint Jacobian, nefc x nv, both growing with K). `benchmarks/entity_scaling.py` breaks the step "
+        "down by stage; `benchmarks/warp_scaling.py` times the same scenes' raw physics on MuJoCo Warp.")
+  mnt = [(k, v) for k, v in summ.items() if k.startswith("entities_") and "_mounted_" in k]
+  if mnt:
+    on = [v for k, v in mnt if "_damage_on_" in k]
+    off = [v for k, v in mnt if "_damage_off_" in k]
+    reading.append(
+        f"- Mounted entities: growing the scene by damageable boxes mounted on the table (1 free box + K-1 mounted, "
+        f"all tracked) keeps {on[0] if on else float('nan'):.0%} of the 1-entity throughput at the largest K "
+        f"(damage off: {off[0] if off else float('nan'):.0%}). A tracked entity that adds no degrees of freedom "
+        "costs its one designed contact pair (pusher-box) and its damage evaluation: model fixtures the task never "
+        "moves (stoves, shelves, wall units) as mounted bodies and keep free joints for what must move.")
   if reading:
     lines += ["## Reading the numbers", ""] + reading + [""]
     if result["platform"] == "cpu":
@@ -607,12 +650,14 @@ def plot(result: dict, path: str) -> None:
         title=f"{result['device']}: throughput vs batch")
   if a.get_legend_handles_labels()[0]:
     a.legend(fontsize=8)
-  for dmg in (True, False):
-    rows = sorted((r for r in result["vs_entities"] if r["damage"] == dmg), key=lambda r: r["entities"])
-    if rows:
-      b.plot([r["entities"] for r in rows], [r["env_steps_per_s"] for r in rows], "o-" if dmg else "s--",
-             label=f"damage {'on' if dmg else 'off'} ({rows[0]['envs']} envs)")
-  b.set(xscale="log", yscale="log", xlabel="tracked entities = free boxes in the scene", ylabel="env steps / s",
+  for section, what in (("vs_entities", "all boxes free"), ("vs_mounted", "1 free + K-1 mounted")):
+    for dmg in (True, False):
+      rows = sorted((r for r in result.get(section, []) if r["damage"] == dmg), key=lambda r: r["entities"])
+      if rows:
+        b.plot([r["entities"] for r in rows], [r["env_steps_per_s"] for r in rows],
+               ("o-" if dmg else "s--") if section == "vs_entities" else ("^-" if dmg else "v--"),
+               label=f"{what}, damage {'on' if dmg else 'off'} ({rows[0]['envs']} envs)")
+  b.set(xscale="log", yscale="log", xlabel="tracked entities = boxes in the scene", ylabel="env steps / s",
         title="throughput vs tracked entities (scene grows)")
   if b.get_legend_handles_labels()[0]:
     b.legend(fontsize=8)
@@ -641,6 +686,8 @@ def build_parser() -> argparse.ArgumentParser:
                   " scene of the vs-tracked curve (default 32)")
   ap.add_argument("--tracked", default=",".join(map(str, ENTITIES)),
                   help="tracked-box counts n in the fixed --k-box scene ('' to skip)")
+  ap.add_argument("--mounted", default=",".join(map(str, ENTITIES)),
+                  help="entity counts K of scenes with 1 free box and K-1 mounted boxes, all tracked ('' to skip)")
   ap.add_argument("--jacobian", default="auto", choices=S.JACOBIANS,
                   help="MuJoCo <option jacobian> of the bench scene (auto: MJX goes sparse from nv >= 60)")
   ap.add_argument("--entity-envs", type=int, default=None, help="batch of the vs-entities curve")
@@ -675,6 +722,8 @@ def main(argv=None) -> int:
   try:
     envs = _parse_ints("--envs", args.envs)
     _parse_ints("--entities", args.entities)
+    if args.mounted:
+      _parse_ints("--mounted", args.mounted)
     if args.tracked:
       big = [t for t in _parse_ints("--tracked", args.tracked) if t > args.k]
       if big:

@@ -98,6 +98,9 @@ def test_summary_and_plot(tmp_path):
             "vs_entities": [r for r in rows if r["envs"] == 8],
             "vs_tracked": [dict(r, boxes=4, env_steps_per_s=r["env_steps_per_s"] * r["entities"] * (0.9 if r["entities"] == 4 else 1))
                            for r in rows if r["envs"] == 8],
+            "vs_mounted": [dict(r, boxes=r["entities"], free_boxes=1,
+                                env_steps_per_s=r["env_steps_per_s"] * r["entities"] * (0.6 if r["entities"] == 4 else 1))
+                           for r in rows if r["envs"] == 8],
             "reference": {"4": {"reference_damage": {"env_steps_per_s": 1.0, "envs": 1, "physics_steps_per_s": 5.0},
                                 "native_no_damage": {"env_steps_per_s": 4.0, "envs": 1, "physics_steps_per_s": 20.0},
                                 "rollout_no_damage": {"env_steps_per_s": 8.0, "envs": 1, "physics_steps_per_s": 40.0, "threads": 2}}}}
@@ -106,10 +109,12 @@ def test_summary_and_plot(tmp_path):
   assert s["entities_4_over_1_throughput_damage_on_8envs"] == pytest.approx(0.25)
   assert s["speedup_over_reference_K4"]["ratio_vs_reference_damage"] == pytest.approx(4.0)
   assert s["tracked_4_over_1_in_4_box_scene_damage_on_8envs"] == pytest.approx(0.9)
+  assert s["entities_4_over_1_mounted_throughput_damage_on_8envs"] == pytest.approx(0.6)
   result["summary"] = s
   md = bench.report_md(result)
-  assert "| 4 | 4 | 8 | on | 4 |" in md and "ratio_vs_reference_damage" in md
+  assert "| 4 | 4 | 4 | 8 | on | 4 |" in md and "ratio_vs_reference_damage" in md
   assert "a fixed scene, n of its boxes tracked" in md
+  assert "| 4 | 4 | 1 | 8 | on | 10 |" in md and "Mounted entities" in md
   bench.plot(result, str(tmp_path / "p.png"))
   assert (tmp_path / "p.png").stat().st_size > 1000
 
@@ -121,6 +126,9 @@ def test_bench_cli_rejects_bad_sizes(capsys):
   with pytest.raises(SystemExit):
     bench.main(["--k", "4", "--tracked", "1,8"])
   assert "--tracked:" in capsys.readouterr().err
+  with pytest.raises(SystemExit):
+    bench.main(["--mounted", "1,x"])
+  assert "--mounted:" in capsys.readouterr().err
 
 
 def test_tracked_subset_of_a_fixed_scene():
@@ -132,13 +140,72 @@ def test_tracked_subset_of_a_fixed_scene():
   assert env.mj_model.nbody == 1 + 1 + 4 and len(env.damage_binding.entity_names) == 2
 
 
+def test_mounted_boxes_add_no_dofs_and_still_take_damage_signals():
+  """Mounted boxes: welded to the world (no dofs, no box-table contacts), yet the pusher loads them."""
+  import jax
+  import jax.numpy as jnp
+
+  from mjx_damage import physics
+
+  with pytest.raises(ValueError, match="free"):
+    S.table_scene_xml(3, free=4)
+  with pytest.raises(ValueError, match="free"):
+    bench.table_env(3, free=0)  # box 0 is observed: it must be free
+  m_all, m_one = S.table_scene(3), S.table_scene(3, free=1)
+  assert (m_all.nv, m_one.nv) == (2 + 3 * 6, 2 + 6)
+  assert [int(m_one.body_weldid[m_one.body(f"box{i}").id]) for i in (1, 2)] == [0, 0]
+  env = bench.table_env(2, free=1)  # box0 free at x = -0.05, box1 mounted at x = +0.05
+  d, ds, _ = bench.batched_initial_state(env, 1)
+  box1 = env.damage_binding.entity_names.index("box1")
+  target = jnp.array([0.05, 0.0], jnp.float32)  # drive the pusher into the mounted box
+
+  @jax.jit
+  def run(d, ds):
+    def body(c, _):
+      d, ds = c
+      d, ds = jax.vmap(lambda d, ds: physics.step(env.sys, env.damage_binding, d.replace(ctrl=target), ds, 5))(d, ds)
+      return (d, ds), ds.f_perp
+    return jax.lax.scan(body, (d, ds), None, length=40)
+
+  (d, ds), f_perp = run(d, ds)
+  # servo force ~ kp * remaining distance (300 N/m x 6.5 cm ~ 20 N) pressing on a body that cannot accelerate
+  assert 10.0 < float(f_perp[-1, 0, box1]) < 40.0
+  assert np.isfinite(np.asarray(d.qpos)).all()
+  assert abs(float(d.qpos[0, 0]) - (0.05 - S.BOX_HALF - S.PUSHER_RADIUS)) < 0.01  # pusher stopped at the box face
+
+
 @pytest.mark.slow
 def test_bench_end_to_end(tmp_path):
   out = tmp_path / "b.json"
-  assert bench.main(["--envs", "2", "--entities", "1,2", "--tracked", "1,2", "--k", "2", "--entity-envs", "2", "--ratio-envs", "2",
+  assert bench.main(["--envs", "2", "--entities", "1,2", "--tracked", "1,2", "--mounted", "1,2", "--k", "2",
+                     "--entity-envs", "2", "--ratio-envs", "2",
                      "--target-s", "0.2", "--max-steps", "3", "--ref-envs", "1", "--ref-steps", "2",
                      "--task", "", "--out", str(out)]) == 0
   res = json.loads(out.read_text())
   assert res["summary"]["damage_on_off_ratio_K2_2envs"] > 0
   assert res["summary"]["tracked_2_over_1_in_2_box_scene_damage_on_2envs"] > 0
+  assert res["summary"]["entities_2_over_1_mounted_throughput_damage_on_2envs"] > 0
   assert (tmp_path / "b.png").exists()
+
+
+def test_warp_scaling_plan_and_report(capsys):
+  """benchmarks/warp_scaling.py: bad plan points are rejected before anything runs; ratios are per config."""
+  import importlib.util
+  import os
+
+  path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "warp_scaling.py")
+  spec = importlib.util.spec_from_file_location("warp_scaling", path)
+  W = importlib.util.module_from_spec(spec)
+  spec.loader.exec_module(W)
+  for bad in ("warp-cg:sweep:2:3", "cuda:sweep:1:1", "jax-cg:spin:1:1", "jax-cg:sweep:1"):
+    with pytest.raises(SystemExit):
+      W.main(["--plan", bad, "--out", "unused.json"])
+    assert "--plan" in capsys.readouterr().err
+  rows = [dict(config=c, motion="sweep", boxes=k, free_boxes=f, nv=2 + 6 * f, physics_steps_per_s=v,
+               compile_and_first_s=1.0, finite=True)
+          for c, k, f, v in (("jax-cg", 1, 1, 100.0), ("jax-cg", 4, 4, 10.0), ("warp-cg", 1, 1, 200.0),
+                             ("warp-cg", 4, 1, 150.0))]
+  s = W.summarize(rows)
+  assert s == {"jax-cg_sweep_K4_free_over_K1": pytest.approx(0.1), "warp-cg_sweep_K4_1free_over_K1": pytest.approx(0.75)}
+  md = W.report_md({"device": "d", "command": "c", "date": "t", "versions": {}, "envs": 2, "rows": rows})
+  assert "| warp-cg | sweep | 4 | 1 | 8 | 150 | 75.0% |" in md

@@ -16,6 +16,14 @@ a many-object scene for MJX:
   not the table. It makes contacts happen, so the damage path does real work.
 
 Contacts per environment: 4 per box (box-plane) + 1 per box (sphere-box).
+
+``free`` < K mounts boxes ``free``..K−1 on the table (no joint: welded to the
+world, like a stove, a wall-hung cabinet or a laptop that the task never
+moves). A mounted box is still a damageable entity the pusher can hit, but it
+adds no degrees of freedom and no box-table contacts (MuJoCo never collides two
+bodies welded to the world), so its only cost is its pusher-box pair. Free
+boxes are what make a scene expensive: each adds 6 dofs and 5 contacts, and
+any simulator's work grows at least linearly with them.
 """
 
 from __future__ import annotations
@@ -51,14 +59,15 @@ JACOBIANS = ("auto", "dense", "sparse")
 
 
 def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_iterations: int = 8,
-                    solver: str = "CG", jacobian: str = "auto") -> str:
+                    solver: str = "CG", jacobian: str = "auto", free: int | None = None) -> str:
   """MJCF text of the K-box scene (k >= 1).
 
   Solver iterations are kept small (MJX's recommendation for throughput); the
   same XML feeds the native-MuJoCo reference, so both solve the same problem.
   ``jacobian`` is MuJoCo's ``<option jacobian>``: with "auto" MJX switches to
   sparse mass matrices from nv >= 60 (K >= 10 here), which its own docs say
-  GPUs tend to run slower than dense.
+  GPUs tend to run slower than dense. ``free``: boxes 0..free−1 get a free
+  joint, the rest are mounted (default: all K free).
   """
   if not isinstance(k, int) or isinstance(k, bool) or k < 1:
     raise ValueError(f"k: number of boxes must be an int >= 1, got {k!r}")
@@ -66,13 +75,18 @@ def table_scene_xml(k: int, timestep: float = 0.004, iterations: int = 4, ls_ite
     raise ValueError(f"solver: must be 'CG' or 'Newton', got {solver!r}")
   if jacobian not in JACOBIANS:
     raise ValueError(f"jacobian: must be one of {JACOBIANS}, got {jacobian!r}")
+  free = k if free is None else free
+  if not isinstance(free, int) or isinstance(free, bool) or not 0 <= free <= k:
+    raise ValueError(f"free: number of free boxes must be an int in [0, k={k}], got {free!r}")
   boxes = []
   for i, (x, y) in enumerate(grid_xy(k)):
+    joint = f'      <freejoint name="box{i}"/>\n' if i < free else ""
+    rgba = ".9 .6 .2 1" if i < free else ".4 .5 .7 1"
     boxes.append(
         f'    <body name="box{i}" pos="{x:.4f} {y:.4f} {BOX_HALF:.4f}">\n'
-        f'      <freejoint name="box{i}"/>\n'
+        f"{joint}"
         f'      <geom name="box{i}" type="box" size="{BOX_HALF} {BOX_HALF} {BOX_HALF}" mass="0.2"'
-        f' contype="1" conaffinity="2" rgba=".9 .6 .2 1"/>\n'
+        f' contype="1" conaffinity="2" rgba="{rgba}"/>\n'
         f"    </body>"
     )
   r = sweep_radius(k) + 0.2
