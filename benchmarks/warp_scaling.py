@@ -1,0 +1,200 @@
+"""Is the free-body entity scaling an MJX-JAX artefact? The same scenes on MuJoCo Warp.
+
+``mjx-damage bench`` finds that growing the bench scene from 1 to 32 free boxes
+keeps ~3 % of the throughput, damage on or off. This script times the raw
+physics (``mjx.step``, no damage: mjx_damage's damage path reads the JAX
+implementation's contact layout) of the same scenes under both MJX
+implementations in one process:
+
+* ``impl=jax``  — MJX's JAX implementation (what mjx_damage runs on);
+* ``impl=warp`` — MJX's MuJoCo Warp implementation (sparse constraint Jacobian,
+  per-world kernels), CG as in the bench scene and Newton, and Newton with
+  MuJoCo's sleeping enabled (resting bodies stop being simulated).
+
+Scenes (``mjx_damage.scenes.bench_table``): K free boxes; 1 free box + K-1
+mounted boxes; the pusher follows the bench's Lissajous sweep over the whole
+grid ("sweep") or a small circle at the grid centre ("local", so most boxes rest
+and can sleep).
+
+warp-lang is not a dependency of the project (a 150 MB wheel; MuJoCo Warp is
+only fast on NVIDIA GPUs, and MJX 3.17 vendors it, so warp-lang is all it
+needs). Usage, with warp-lang importable::
+
+    python benchmarks/warp_scaling.py --envs 8192 --out $OUT/warp_scaling_gpu.json
+
+How the committed H100 result was run (the device tool carries at most 64 MiB a
+call and keeps a machine for 30 s between calls): here, unpack the cp312 wheels
+of mujoco and mujoco-mjx 3.17.0 and warp-lang 1.19.0 (py3 manylinux_2_28) into
+one folder, ``tar | xz -6`` it (122 MB) and split it in two halves ``.wpa/p`` and
+``.wpb/p`` (git-ignored). Call 1 carries ``.wpa`` and copies it to ``/tmp/pa``;
+call 2 carries the small wheels (trimesh, brax and their pure-Python needs) to
+``/tmp/wpc``; call 3 carries ``.wpb`` and runs::
+
+    cat /tmp/pa .wpb/p | xz -d | tar -x -C /tmp/site
+    python3 -m pip install -q --no-index --no-deps --target /tmp/site /tmp/wpc/*.whl
+    PYTHONPATH=/tmp/site:$PWD python3 benchmarks/warp_scaling.py --envs 8192 --out $OUT/warp_scaling_gpu.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+# (name, impl, solver, sleep); CG matches the bench scene (4 iterations, 8 line-search steps)
+CONFIGS = {
+    "jax-cg": ("jax", "CG", False),
+    "warp-cg": ("warp", "CG", False),
+    "warp-newton": ("warp", "Newton", False),
+    "warp-newton-sleep": ("warp", "Newton", True),
+}
+
+
+def sweep_target(t, radius, jnp):
+  w = 2 * math.pi / 2.0  # the bench's pusher_ctrl, period 2 s
+  return jnp.stack([radius * jnp.sin(w * t), 0.8 * radius * jnp.sin(2 * w * t + 0.5)])
+
+
+def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) -> dict:
+  import jax
+  import jax.numpy as jnp
+  import mujoco
+  import numpy as np
+  from mujoco import mjx
+
+  from mjx_damage.scenes import bench_table as S
+
+  impl, solver, sleep = CONFIGS[config]
+  m = S.table_scene(k, solver=solver, free=free)
+  if sleep:
+    m.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_SLEEP
+  radius = S.sweep_radius(k) if motion == "sweep" else 0.04
+  if impl == "warp":
+    mx = mjx.put_model(m, impl="warp")
+    # iteration-limit warnings are printed from the kernels every step: they would be timed
+    mx = mx.replace(opt=mx.opt.replace(_impl=mx.opt._impl.replace(warn_overflow=0)))
+    per_world_contacts = 5 * free + (k - free) + 4
+    d = jax.jit(jax.vmap(lambda _: mjx.make_data(m, impl="warp", naconmax=envs * per_world_contacts,
+                                                njmax=4 * per_world_contacts + 8)))(jnp.arange(envs))
+  else:
+    mx = mjx.put_model(m)
+    d = jax.tree.map(lambda x: jnp.broadcast_to(x, (envs,) + x.shape), mjx.make_data(mx))
+
+  def one(d):
+    return mjx.step(mx, d.replace(ctrl=sweep_target(d.time, radius, jnp).astype(d.ctrl.dtype)))
+
+  roll = jax.jit(lambda d: jax.lax.fori_loop(0, nstep, lambda _, x: jax.vmap(one)(x), d))
+  t0 = time.perf_counter()
+  d = jax.block_until_ready(roll(d))
+  compile_s = time.perf_counter() - t0
+  times = []
+  for _ in range(2):
+    t0 = time.perf_counter()
+    d = jax.block_until_ready(roll(d))
+    times.append(time.perf_counter() - t0)
+  z = np.asarray(d.xpos[:, 2:, 2])  # box heights (bodies after world and pusher)
+  return {"config": config, "impl": impl, "solver": solver, "sleep": sleep, "boxes": k, "free_boxes": free,
+          "motion": motion, "nv": int(m.nv), "envs": envs, "steps": nstep, "compile_and_first_s": compile_s,
+          "seconds": min(times), "physics_steps_per_s": envs * nstep / min(times),
+          "finite": bool(np.isfinite(np.asarray(d.qpos)).all()),
+          "box_height_min_max_m": [float(z.min()), float(z.max())]}
+
+
+def summarize(rows: list[dict]) -> dict:
+  out = {}
+  for r in rows:
+    if r["boxes"] == 1:
+      continue
+    base = next((b for b in rows if b["config"] == r["config"] and b["motion"] == r["motion"]
+                 and b["boxes"] == 1), None)
+    if base:
+      scene = "free" if r["free_boxes"] == r["boxes"] else f"{r['free_boxes']}free"
+      out[f"{r['config']}_{r['motion']}_K{r['boxes']}_{scene}_over_K1"] = (
+          r["physics_steps_per_s"] / base["physics_steps_per_s"])
+  return out
+
+
+def report_md(res: dict) -> str:
+  lines = [f"# Entity scaling on MuJoCo Warp vs MJX-JAX ({res['device']})", "",
+           f"Command: `{res['command']}`  ", f"Date: {res['date']}; versions: {json.dumps(res['versions'])}", "",
+           "Raw physics (`mjx.step`, no damage), one physics step per iteration, batch "
+           f"{res['envs']}. Scene: `mjx_damage.scenes.bench_table` (K boxes, the first `free` with free joints, the "
+           "rest mounted; pusher on 2 slide joints). motion `sweep` = the bench's Lissajous over the whole grid, "
+           "`local` = a 4 cm circle at the grid centre. How to run it on the GPU machine: the docstring of "
+           "`benchmarks/warp_scaling.py`.", "",
+           "| config | motion | boxes | free | nv | physics steps/s | x K=1 | compile+first s | finite |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+  for r in res["rows"]:
+    base = next((b for b in res["rows"] if b["config"] == r["config"] and b["motion"] == r["motion"]
+                 and b["boxes"] == 1), None)
+    rel = f"{r['physics_steps_per_s'] / base['physics_steps_per_s']:.1%}" if base else ""
+    lines.append(f"| {r['config']} | {r['motion']} | {r['boxes']} | {r['free_boxes']} | {r['nv']} | "
+                 f"{r['physics_steps_per_s']:,.0f} | {rel} | {r['compile_and_first_s']:.1f} | {r['finite']} |")
+  if res.get("errors"):
+    lines += ["", "Errors: " + "; ".join(json.dumps(e) for e in res["errors"])]
+  return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+  ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+  ap.add_argument("--envs", type=int, default=8192)
+  ap.add_argument("--steps", type=int, default=200, help="physics steps per timed call")
+  ap.add_argument("--plan", default="jax-cg:sweep:1:1,jax-cg:sweep:32:32,jax-cg:sweep:32:1,"
+                  "warp-cg:sweep:1:1,warp-cg:sweep:32:32,warp-cg:sweep:32:1,"
+                  "warp-newton:sweep:1:1,warp-newton:sweep:32:32,warp-newton:sweep:32:1,"
+                  "warp-newton:local:1:1,warp-newton:local:32:32,"
+                  "warp-newton-sleep:local:1:1,warp-newton-sleep:local:32:32",
+                  help="comma-separated config:motion:boxes:free points, run in order")
+  ap.add_argument("--out", required=True)
+  args = ap.parse_args(argv)
+  plan = []
+  for item in args.plan.split(","):
+    try:
+      config, motion, k, free = item.split(":")
+      k, free = int(k), int(free)
+    except ValueError:
+      ap.error(f"--plan: expected config:motion:boxes:free, got {item!r}")
+    if config not in CONFIGS or motion not in ("sweep", "local") or not 1 <= free <= k:
+      ap.error(f"--plan: bad point {item!r} (configs {sorted(CONFIGS)}, motion sweep|local, 1 <= free <= boxes)")
+    plan.append((config, motion, k, free))
+  if args.envs < 1 or args.steps < 1:
+    ap.error("--envs and --steps must be >= 1")
+  import jax
+  import mujoco
+
+  res = {"command": "python benchmarks/warp_scaling.py " + " ".join(sys.argv[1:] if argv is None else argv),
+         "date": time.strftime("%Y-%m-%d %H:%M:%S"), "device": jax.devices()[0].device_kind,
+         "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__}, "envs": args.envs, "rows": [],
+         "errors": []}
+  try:
+    import warp
+
+    warp.config.quiet = True  # no per-module load lines in the log
+    res["versions"]["warp"] = warp.__version__
+  except ImportError:
+    pass
+  for config, motion, k, free in plan:
+    try:
+      row = measure(config, k, free, motion, args.envs, args.steps)
+      res["rows"].append(row)
+      print(json.dumps(row), flush=True)
+    except Exception as e:  # keep the other points (e.g. warp not installed)
+      res["errors"].append({"point": f"{config}:{motion}:{k}:{free}", "error": f"{type(e).__name__}: {str(e)[:300]}"})
+      print("error", res["errors"][-1], flush=True)
+    res["summary"] = summarize(res["rows"])
+    with open(args.out, "w") as f:
+      json.dump(res, f, indent=1)
+    with open(os.path.splitext(args.out)[0] + ".md", "w") as f:
+      f.write(report_md(res))
+  print(json.dumps(res["summary"], indent=1))
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
