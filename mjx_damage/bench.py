@@ -66,7 +66,7 @@ def _table_env_class():
     (:func:`mjx_damage.scenes.bench_table.table_scene_xml`); box 0 is always free.
 
     Success: box 0 pushed more than 5 cm from where it started. Observation
-    f32[5]: pusher xy, box 0 xyz (m). Reset jitters every box by ±1 cm.
+    f32[5]: pusher xy, box 0 xyz (m). Reset jitters every free box by ±1 cm.
     """
 
     def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
