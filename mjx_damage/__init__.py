@@ -8,6 +8,7 @@ models MuJoCo lacks, and a Brax wrapper. See DAMAGE_MODEL.md for the model.
 from mjx_damage import compat as _compat
 
 _compat.install()
+_compat.import_mjx_quietly()
 
 from mjx_damage.binding import Binding, bind, contact_forces, link_acceleration, link_velocity  # noqa: E402
 from mjx_damage.config import resolve  # noqa: E402

@@ -43,3 +43,15 @@ def test_brax_ppo_train_runs_through_compat_shim():
   state = jax.jit(env.reset)(jax.random.PRNGKey(0))
   action, _ = policy(state.obs, jax.random.PRNGKey(1))
   assert action.shape == (1,)
+
+
+def test_import_is_quiet_about_optional_warp():
+  """MJX 3.17 prints two 'Failed to import warp' lines when warp-lang is absent; mjx_damage hides only those."""
+  import subprocess
+  import sys
+
+  out = subprocess.run([sys.executable, "-c", "import mjx_damage; from mujoco import mjx; print('imported')"],
+                       capture_output=True, text=True, timeout=300)
+  assert out.returncode == 0, out.stderr
+  assert out.stdout.strip().splitlines()[-1] == "imported"
+  assert "Failed to import" not in out.stdout
