@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -56,11 +55,6 @@ CONFIGS = {
 }
 
 
-def sweep_target(t, radius, jnp):
-  w = 2 * math.pi / 2.0  # the bench's pusher_ctrl, period 2 s
-  return jnp.stack([radius * jnp.sin(w * t), 0.8 * radius * jnp.sin(2 * w * t + 0.5)])
-
-
 def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) -> dict:
   import jax
   import jax.numpy as jnp
@@ -68,6 +62,7 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
   import numpy as np
   from mujoco import mjx
 
+  from mjx_damage.bench import pusher_ctrl
   from mjx_damage.scenes import bench_table as S
 
   impl, solver, sleep = CONFIGS[config]
@@ -87,7 +82,7 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
     d = jax.tree.map(lambda x: jnp.broadcast_to(x, (envs,) + x.shape), mjx.make_data(mx))
 
   def one(d):
-    return mjx.step(mx, d.replace(ctrl=sweep_target(d.time, radius, jnp).astype(d.ctrl.dtype)))
+    return mjx.step(mx, d.replace(ctrl=pusher_ctrl(d.time, radius, jnp).astype(d.ctrl.dtype)))
 
   roll = jax.jit(lambda d: jax.lax.fori_loop(0, nstep, lambda _, x: jax.vmap(one)(x), d))
   t0 = time.perf_counter()
@@ -106,13 +101,18 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
           "box_height_min_max_m": [float(z.min()), float(z.max())]}
 
 
+def _k1(rows: list[dict], r: dict):
+  """The K=1 row of ``r``'s config and motion (the denominator of its ratio), or None."""
+  return next((b for b in rows if b["config"] == r["config"] and b["motion"] == r["motion"] and b["boxes"] == 1),
+              None)
+
+
 def summarize(rows: list[dict]) -> dict:
   out = {}
   for r in rows:
     if r["boxes"] == 1:
       continue
-    base = next((b for b in rows if b["config"] == r["config"] and b["motion"] == r["motion"]
-                 and b["boxes"] == 1), None)
+    base = _k1(rows, r)
     if base:
       scene = "free" if r["free_boxes"] == r["boxes"] else f"{r['free_boxes']}free"
       out[f"{r['config']}_{r['motion']}_K{r['boxes']}_{scene}_over_K1"] = (
@@ -131,8 +131,7 @@ def report_md(res: dict) -> str:
            "| config | motion | boxes | free | nv | physics steps/s | x K=1 | compile+first s | finite |",
            "|---|---|---:|---:|---:|---:|---:|---:|---|"]
   for r in res["rows"]:
-    base = next((b for b in res["rows"] if b["config"] == r["config"] and b["motion"] == r["motion"]
-                 and b["boxes"] == 1), None)
+    base = _k1(res["rows"], r)
     rel = f"{r['physics_steps_per_s'] / base['physics_steps_per_s']:.1%}" if base else ""
     lines.append(f"| {r['config']} | {r['motion']} | {r['boxes']} | {r['free_boxes']} | {r['nv']} | "
                  f"{r['physics_steps_per_s']:,.0f} | {rel} | {r['compile_and_first_s']:.1f} | {r['finite']} |")
