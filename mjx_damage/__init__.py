@@ -2,13 +2,23 @@
 
 Pure damage evaluation models (mechanical, thermal, fluid) over batched MJX
 state, health integrated at every physics substep, temperature and liquid
-models MuJoCo lacks, and a Brax wrapper. See DAMAGE_MODEL.md for the model.
+models MuJoCo lacks, and a Brax wrapper. See docs/DAMAGE_MODEL.md for the model.
+
+Importing the package sets two process-wide JAX options before any backend
+starts (see :mod:`mjx_damage.runtime`): the XLA:CPU scheduler flag that avoids
+a thread-pool deadlock of batched MJX calls on CPU, and JAX's persistent
+compilation cache in the user's cache directory.
 """
 
-from mjx_damage import compat as _compat
+from mjx_damage import runtime as _runtime
+
+_runtime.configure_xla_cpu()
+
+from mjx_damage import compat as _compat  # noqa: E402
 
 _compat.install()
 _compat.import_mjx_quietly()
+_runtime.enable_compilation_cache()
 
 from mjx_damage.binding import Binding, bind, contact_forces, link_acceleration, link_velocity  # noqa: E402
 from mjx_damage.config import resolve  # noqa: E402

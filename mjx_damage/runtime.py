@@ -1,0 +1,109 @@
+"""Process-wide JAX settings the package applies on import, before JAX's backends start.
+
+Two settings, each with an environment variable to change or switch it off:
+
+**XLA:CPU scheduler** (``MJX_DAMAGE_XLA_CPU_FIX=0`` to leave XLA_FLAGS alone).
+jaxlib 0.10.2's LAPACK kernels (``lapack_spotrf_ffi``, the batched Cholesky
+that MJX's Newton solver calls every substep) split their batch into tasks on
+XLA's intra-op thread pool and then *block* until those tasks finish
+(``jax::ParallelBatchMap`` → ``absl::BlockingCounter::Wait``). XLA:CPU's thunk
+executor runs independent thunks concurrently on the same pool. When as many
+independent batched Cholesky thunks as the pool has threads (2 on a 2-core
+machine) start at once, every worker waits for tasks that no free worker is
+left to run: a deadlock, process idle, all threads in futex waits. The
+default *concurrency-optimized* HLO scheduler (BFS order) puts independent
+instructions side by side and gives them separate buffers, which is what lets
+the executor run them together. ``--xla_cpu_enable_concurrency_optimized_scheduler=false``
+selects XLA's memory-minimising DFS scheduler: buffers are reused along one
+chain, so the executor sees dependencies between the Cholesky thunks and runs
+them one after another. jaxlib 0.11 removes the blocking parallel path from
+its open-source LAPACK kernels; 0.10.2 is the newest release on PyPI, so the
+package sets the flag. It only changes the CPU compiler; GPU runs are
+unaffected. ``benchmarks/cpu_stall.py`` loops the triggering calls under a
+watchdog; ``docs/cpu_stall.md`` has the evidence.
+
+**Persistent compilation cache** (``MJX_DAMAGE_CACHE_DIR=<dir>`` to move it,
+``MJX_DAMAGE_CACHE_DIR=off`` to switch it off). Compiling a task step takes
+15–30 s on a laptop CPU; with JAX's persistent cache the second run of the same
+command starts in seconds. Default location: ``$XDG_CACHE_HOME/mjx_damage/jax``
+(``~/.cache/mjx_damage/jax``). A ``JAX_COMPILATION_CACHE_DIR`` the user set
+already wins.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import warnings
+
+CPU_SCHEDULER_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+_FLAG_NAME = CPU_SCHEDULER_FLAG.split("=")[0]
+
+
+def _off(value: str | None) -> bool:
+  return value is not None and value.strip().lower() in ("0", "off", "false", "no", "")
+
+
+def backends_started() -> bool:
+  """True when some JAX backend already exists (then XLA_FLAGS are fixed for this process)."""
+  xb = sys.modules.get("jax._src.xla_bridge")
+  return bool(xb is not None and getattr(xb, "_backends", None))
+
+
+def xla_flags_with_cpu_fix(flags: str) -> str:
+  """``flags`` with the scheduler flag added, unless the user already chose a value for it."""
+  if _FLAG_NAME in flags:
+    return flags
+  return (flags + " " + CPU_SCHEDULER_FLAG).strip()
+
+
+def configure_xla_cpu() -> bool:
+  """Add the scheduler flag to ``XLA_FLAGS``; True when the process will run with it.
+
+  Warns (once, naming the variable to set) when a JAX backend started before
+  :mod:`mjx_damage` was imported, since XLA reads its flags only then.
+  """
+  if _off(os.environ.get("MJX_DAMAGE_XLA_CPU_FIX")):
+    return False
+  flags = os.environ.get("XLA_FLAGS", "")
+  if _FLAG_NAME in flags:
+    return CPU_SCHEDULER_FLAG in flags
+  if backends_started():
+    warnings.warn(
+        "mjx_damage was imported after JAX started its backends, so it could not set "
+        f"XLA_FLAGS={CPU_SCHEDULER_FLAG}; batched MJX calls on CPU can deadlock without it. "
+        "Import mjx_damage first, or export that XLA_FLAGS value before starting Python.",
+        RuntimeWarning, stacklevel=3)
+    return False
+  os.environ["XLA_FLAGS"] = xla_flags_with_cpu_fix(flags)
+  return True
+
+
+def cache_dir() -> str | None:
+  """The persistent compilation cache directory the package uses, or None when off."""
+  explicit = os.environ.get("MJX_DAMAGE_CACHE_DIR")
+  if explicit is not None:
+    return None if _off(explicit) else os.path.abspath(os.path.expanduser(explicit))
+  if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+    return os.path.abspath(os.path.expanduser(os.environ["JAX_COMPILATION_CACHE_DIR"]))
+  base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+  return os.path.join(base, "mjx_damage", "jax")
+
+
+def enable_compilation_cache() -> str | None:
+  """Point JAX's persistent compilation cache at :func:`cache_dir`; returns it (None: off)."""
+  path = cache_dir()
+  if path is None:
+    return None
+  import jax
+
+  try:
+    os.makedirs(path, exist_ok=True)
+  except OSError as e:  # read-only home: run without the cache rather than fail
+    warnings.warn(f"compilation cache disabled: cannot create {path}: {e}", RuntimeWarning, stacklevel=3)
+    return None
+  jax.config.update("jax_compilation_cache_dir", path)
+  # MJX steps take seconds to compile; cache everything that takes noticeably long
+  jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+  jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+  return path

@@ -1,0 +1,54 @@
+"""Regression test for the XLA:CPU deadlock of batched MJX calls (see mjx_damage/runtime.py).
+
+A single jit(vmap) call of 512 place_plate envs stalled forever on a 2-core
+machine before the package set its XLA:CPU scheduler flag. Each check runs in a
+fresh process (XLA reads its flags once per process) under a timeout, so a
+regression fails the test instead of freezing the suite.
+"""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCRIPT = os.path.join(ROOT, "benchmarks", "cpu_stall.py")
+
+
+def _loop(checks: str, repeats: int, calls: int, timeout: float):
+  r = subprocess.run(
+      [sys.executable, SCRIPT, "--checks", checks, "--modes", "fix", "--repeats", str(repeats),
+       "--envs", "512", "--calls", str(calls), "--timeout", str(timeout), "--out", "-"],
+      cwd=ROOT, capture_output=True, text=True, timeout=repeats * (timeout + 60) * len(checks.split(",")))
+  assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-4000:]
+  assert "STALLED" not in r.stdout
+
+
+def test_package_sets_the_cpu_scheduler_flag():
+  code = "import mjx_damage, os; print(os.environ['XLA_FLAGS'])"
+  env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "MJX_DAMAGE_XLA_CPU_FIX")}
+  out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+  assert "--xla_cpu_enable_concurrency_optimized_scheduler=false" in out
+  # a user's own choice for the flag is kept
+  env["XLA_FLAGS"] = "--xla_cpu_enable_concurrency_optimized_scheduler=true"
+  out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+  assert out.strip() == "--xla_cpu_enable_concurrency_optimized_scheduler=true"
+
+
+def test_import_after_backend_start_warns():
+  code = ("import jax, warnings; jax.devices(); warnings.simplefilter('error');\n"
+          "try:\n  import mjx_damage\nexcept RuntimeWarning as e:\n  print('warned', e)")
+  env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "MJX_DAMAGE_XLA_CPU_FIX")}
+  out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True).stdout
+  assert out.startswith("warned") and "XLA_FLAGS" in out
+
+
+def test_one_call_of_512_envs_finishes():
+  """The call that deadlocked: 512 envs of a task step, and the 4-Cholesky reproduction."""
+  _loop("task,cholesky", repeats=1, calls=2, timeout=240)
+
+
+@pytest.mark.slow
+def test_512_envs_twenty_times():
+  _loop("task", repeats=20, calls=1, timeout=240)
