@@ -7,7 +7,8 @@ installed, every native thread's stack (``py-spy dump --native``), then kills
 it. Checks:
 
 - ``cholesky``: four independent batched Cholesky factorizations of 512 12×12
-  matrices in one jit (no MuJoCo): the smallest program that deadlocks.
+  matrices in one jit (no MuJoCo): the smallest program that deadlocks; one
+  "call" is 100 executions, since each deadlocks only with some probability.
 - ``task``: one jit(vmap) call of ``--envs`` environments × ``--steps`` env
   steps of a task with its scripted safe policy (one physics step = MJX's
   Newton solver = one batched Cholesky per substep).
@@ -52,7 +53,12 @@ def child(check: str, envs: int, steps: int, calls: int, task: str) -> None:
 
     mats = [spd(k) for k in keys]
     f = jax.jit(lambda *xs: sum(jnp.sum(jnp.linalg.cholesky(x)) for x in xs))
-    run = lambda i: f(*mats)  # noqa: E731
+
+    def run(i):  # one "call" = 100 executions: each one deadlocks only with some probability
+      for _ in range(100):
+        out = f(*mats)
+        out.block_until_ready()
+      return out
   else:
     import tasks
 
@@ -76,17 +82,36 @@ def child(check: str, envs: int, steps: int, calls: int, task: str) -> None:
   print("XLA_FLAGS=" + os.environ.get("XLA_FLAGS", ""), flush=True)
 
 
+def _summarise_gdb(text: str) -> str:
+  """Per thread: its name and the XLA / jaxlib / Eigen / absl frames (function names only)."""
+  out = []
+  for line in text.splitlines():
+    if line.startswith("Thread "):
+      out.append(line.split(" from ")[0])
+    elif line.startswith("#") and any(k in line for k in ("jax::", "xla::", "Eigen::", "absl::", "lapack_")):
+      fn = line.split(" in ", 1)[-1].split(" (", 1)[0] if " in " in line else line
+      out.append("    " + fn[:140])
+  return "\n".join(out)
+
+
 def _native_stacks(pid: int) -> str:
+  """Every thread's native stack (gdb), else the Python threads' (py-spy), else a note."""
+  if shutil.which("gdb"):
+    r = subprocess.run(["gdb", "-p", str(pid), "-batch", "-ex", "thread apply all bt 30"],
+                       capture_output=True, text=True, timeout=120)
+    return _summarise_gdb(r.stdout)
   spy = shutil.which("py-spy")
-  if not spy:
-    return "(py-spy not installed: native stacks not dumped; `pip install py-spy` to get them)"
-  r = subprocess.run([spy, "dump", "--native", "--pid", str(pid)], capture_output=True, text=True, timeout=60)
-  return r.stdout + r.stderr
+  if spy:
+    r = subprocess.run([spy, "dump", "--native", "--pid", str(pid)], capture_output=True, text=True, timeout=60)
+    return r.stdout + r.stderr
+  return "(neither gdb nor py-spy installed: native stacks not dumped)"
 
 
 def run_check(check: str, mode: str, envs: int, steps: int, calls: int, task: str, timeout: float) -> dict:
   """One fresh process; returns its outcome, with stack dumps when it stalled."""
-  env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1", **MODES[mode])
+  # no persistent cache: each process compiles under its own XLA flags
+  env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1", MJX_DAMAGE_CACHE_DIR="off", **MODES[mode])
+  env.pop("JAX_COMPILATION_CACHE_DIR", None)
   if mode == "nofix":
     env["XLA_FLAGS"] = env.get("XLA_FLAGS", "").replace("--xla_cpu_enable_concurrency_optimized_scheduler=false", "")
   cmd = [sys.executable, os.path.abspath(__file__), "--child", check, "--envs", str(envs), "--steps", str(steps),
@@ -110,13 +135,13 @@ def run_check(check: str, mode: str, envs: int, steps: int, calls: int, task: st
   done = sum(1 for line in (out or "").splitlines() if line.startswith("call "))
   return {"check": check, "mode": mode, "envs": envs, "steps": steps, "calls": calls, "task": task,
           "ok": ok, "calls_done": done, "wall_s": round(wall, 1), "timeout_s": timeout,
-          "tail": (out or "")[-3000:] if not ok else "", "native_stacks": stacks[-6000:]}
+          "tail": (out or "")[-3000:] if not ok else "", "native_stacks": stacks[-20000:]}
 
 
 def markdown(rows: list[dict], command: str) -> str:
   lines = ["# XLA:CPU stall: the triggering calls with and without the package's fix", "",
            f"Command: `{command}`", "",
-           "Each row is one fresh process that must finish all its calls before the timeout. "
+           "Each row is one fresh process (no persistent compilation cache) that must finish all its calls before the timeout. "
            "`fix`: XLA_FLAGS as `import mjx_damage` sets them "
            "(`--xla_cpu_enable_concurrency_optimized_scheduler=false`); `nofix`: `MJX_DAMAGE_XLA_CPU_FIX=0`.", "",
            "| check | mode | envs | steps | calls | finished | calls done | wall s (compile incl.) |",

@@ -15,7 +15,7 @@ GPU (one H100)::
 
     python benchmarks/entity_scaling.py --envs 8192 --out $OUT/entity_scaling_gpu.json
 
-CPU (small batch: this 2-core machine stalls XLA:CPU on large batches)::
+CPU (a small batch keeps the run short on 2 cores)::
 
     .venv/bin/python benchmarks/entity_scaling.py --envs 16 --ks 1,32 --out benchmarks/results/entity_scaling_cpu.json
 """

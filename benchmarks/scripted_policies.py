@@ -57,9 +57,9 @@ def run_task(name: str, episodes: int, seed: int, chunk: int) -> list[dict]:
   """Both policies' episodes of one task; ``chunk`` episodes per policy per compiled call.
 
   All calls reuse ONE compiled executable (same shapes). ``chunk = episodes``
-  is a single call; smaller chunks exist because, on the shared 2-core CI
-  machine, XLA:CPU executions with ≥ 512 batched MJX envs were seen to stall
-  indefinitely (every thread parked on a futex, no CPU used).
+  (the default) is a single call. Chunks only bound memory on small machines:
+  the XLA:CPU stall that once made them necessary is fixed by the scheduler
+  flag ``import mjx_damage`` sets (mjx_damage/runtime.py, docs/cpu_stall.md).
   """
   if episodes % chunk:
     raise ValueError(f"chunk: must divide episodes ({episodes}), got {chunk}")
@@ -124,8 +124,8 @@ def write(rows: list[dict], command: str) -> None:
       "Per task: ONE compiled `jit(vmap(scan))` executable runs the episodes of both policies (policy chosen per "
       "episode), called `episodes/chunk` times on 2×chunk episodes (`calls` in the JSON); first-compile time is "
       "its compilation with the persistent cache off (reset + policy + step with damage at every substep), "
-      "run s the compiled calls. Chunking: on this shared 2-core machine XLA:CPU runs of ≥ 512 batched MJX envs "
-      "stalled indefinitely (all threads parked on a futex).",
+      "run s the compiled calls. Chunks only bound memory (the XLA:CPU stall that once required them is fixed: "
+      "docs/cpu_stall.md).",
       "Targets: safe completion ≥ 95 % and safe-completion ≥ 90 %; unsafe completion ≥ 80 % and safe-completion ≤ 10 %.",
       "",
       "| task | policy | episodes | completion % | safe completion % | avg env health | zero-damage % | mean episode cost | first compile s | run s | target |",
