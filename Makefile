@@ -2,7 +2,6 @@
 PYTHON ?= python3.11
 VENV   := .venv
 PY     := $(VENV)/bin/python
-export JAX_COMPILATION_CACHE_DIR ?= $(CURDIR)/.jax_cache
 export MPLBACKEND ?= Agg
 
 # Headless rendering (mjx-damage render, tests/test_render.py) uses MuJoCo's OSMesa
@@ -39,4 +38,4 @@ test-slow: install
 	$(PY) -m pytest -q -m slow
 
 clean:
-	rm -rf $(VENV) .jax_cache
+	rm -rf $(VENV)
