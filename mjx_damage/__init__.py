@@ -20,7 +20,8 @@ _compat.install()
 _compat.import_mjx_quietly()
 _runtime.enable_compilation_cache()
 
-from mjx_damage.binding import Binding, bind, contact_forces, link_acceleration, link_velocity  # noqa: E402
+from mjx_damage.backends.mjx_jax import contact_forces  # noqa: E402
+from mjx_damage.binding import Binding, bind, link_acceleration, link_velocity  # noqa: E402
 from mjx_damage.config import resolve  # noqa: E402
 from mjx_damage.env import DamageEnv  # noqa: E402
 from mjx_damage.fluid import fluid_damage  # noqa: E402

@@ -1,10 +1,13 @@
-"""Binding a damage config to a MuJoCo model, and extracting link signals from MJX data.
+"""Binding a damage config to a MuJoCo model: the index bookkeeping every backend needs.
 
 :func:`bind` runs once, in Python, before anything is compiled: it validates the
 config, and builds static index arrays (geom → tracked link → entity, each
-link's ancestor dofs). The extraction functions below are pure and jittable;
-they read one environment's ``mjx.Data`` (vmap them for a batch) and return
-world-frame quantities for :class:`~mjx_damage.signals.LinkSignals`.
+link's ancestor dofs). :func:`link_acceleration` and :func:`link_velocity` are
+pure and jittable; they read the standard kinematic fields of one environment's
+``mjx.Data`` (``cdof``, ``cvel``, ``qacc``; vmap them for a batch) and return
+world-frame quantities for :class:`~mjx_damage.signals.LinkSignals`. Contact
+forces depend on a simulator's contact layout: each backend reads them
+(:mod:`mjx_damage.backends`).
 """
 
 from __future__ import annotations
@@ -17,9 +20,12 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from mujoco import mjx
-from mujoco.mjx._src import support as mjx_support
 
 from mjx_damage import config as C
+from mjx_damage import liquid as Lq
+from mjx_damage import temperature as T
+# Re-exported for callers of the old path (mjx_damage.wrapper); the contact layout is the backend's.
+from mjx_damage.backends.mjx_jax import contact_forces  # noqa: F401
 from mjx_damage.params import DamageParams
 
 
@@ -89,9 +95,6 @@ def bind(model: mujoco.MjModel, config) -> Binding:
       adr, num = model.body_dofadr[b], model.body_dofnum[b]
       link_dofs[li, adr : adr + num] = 1.0
       b = model.body_parentid[b]
-  from mjx_damage import temperature as T  # local: modules build on binding
-  from mjx_damage import liquid as Lq
-
   binding = Binding(
       resolved=resolved,
       geom_link=geom_link,
@@ -106,37 +109,6 @@ def bind(model: mujoco.MjModel, config) -> Binding:
       thermal=T.build(model, binding, resolved.raw),
       liquid=Lq.build(model, binding, resolved.raw),
   )
-
-
-def contact_forces(binding: Binding, m: mjx.Model, d: mjx.Data) -> tuple[jax.Array, jax.Array]:
-  """World-frame contact forces on tracked links from one environment's active contacts.
-
-  Each contact loads both of its bodies, equal and opposite: the contact-frame
-  force is what ``geom[0]`` exerts on ``geom[1]``.
-
-  Returns:
-    forces: f32[2C, 3] N (C = contact slots of the model; inactive slots give 0).
-    force_link: i32[2C] link each force acts on, −1 for untracked bodies.
-  """
-  con = d._impl.contact
-  if con.dist.shape[0] == 0:
-    return jnp.zeros((0, 3), jnp.float32), jnp.zeros((0,), jnp.int32)
-  forces, rows = [], []
-  for dim in sorted(set(np.asarray(con.dim).tolist())):
-    f, idx = mjx_support.contact_force_dim(m, d, dim)
-    forces.append(f[:, :3])
-    rows.append(idx)
-  rows = np.concatenate(rows)
-  local = jnp.concatenate(forces)
-  frame = con.frame[rows].reshape(-1, 3, 3)  # rows: normal, tangent1, tangent2
-  world = jnp.einsum("kij,ki->kj", frame, local)
-  active = (con.dist[rows] - con.includemargin[rows]) < 0
-  world = jnp.where(active[:, None], world, 0.0)
-  geom = con.geom[rows]
-  geom_link = jnp.asarray(binding.geom_link)
-  link0 = jnp.where(geom[:, 0] >= 0, geom_link[geom[:, 0]], -1)
-  link1 = jnp.where(geom[:, 1] >= 0, geom_link[geom[:, 1]], -1)
-  return jnp.concatenate([world, -world]), jnp.concatenate([link1, link0])
 
 
 def _point_motion(binding: Binding, cvel6: jax.Array, cacc6: jax.Array, d: mjx.Data):

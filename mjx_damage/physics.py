@@ -18,7 +18,8 @@ from mujoco import mjx
 from mjx_damage import health as H
 from mjx_damage import liquid as Lq
 from mjx_damage import temperature as T
-from mjx_damage.binding import Binding, contact_forces, link_acceleration, link_velocity
+from mjx_damage.backends.mjx_jax import contact_forces
+from mjx_damage.binding import Binding, link_acceleration, link_velocity
 from mjx_damage.params import DamageParams
 from mjx_damage.signals import Damage, LinkSignals, evaluate
 
