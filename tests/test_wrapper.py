@@ -11,7 +11,7 @@ from mujoco import mjx
 
 import mjx_damage as md
 from mjx_damage import native, physics
-from mjx_damage.demo import DROP_CONFIG, DropEnv
+from tasks.drop import DROP_CONFIG, DropEnv, load_scene
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +63,7 @@ class ForeignDrop(Env):
   """A Brax env that knows nothing about damage: plain mjx.step in a hidden loop."""
 
   def __init__(self):
-    self.mj_model = md.demo.scenes.load("drop")
+    self.mj_model = load_scene()
     self.sys = mjx.put_model(self.mj_model)
     self.q = self.mj_model.jnt_qposadr[self.mj_model.joint("plate").id]
 
@@ -115,7 +115,7 @@ def _per_link(forces, links, L):
 
 def test_native_and_mjx_extract_the_same_signals():
   """Both backends read the same state alike: per-link net contact force and acceleration."""
-  m = md.demo.scenes.load("drop")
+  m = load_scene()
   b = md.bind(m, DROP_CONFIG)
   q = m.jnt_qposadr[m.joint("plate").id]
   d = mujoco.MjData(m)
