@@ -2,12 +2,9 @@
 
 :func:`bind` runs once, in Python, before anything is compiled: it validates the
 config, and builds static index arrays (geom → tracked link → entity, each
-link's ancestor dofs). :func:`link_acceleration` and :func:`link_velocity` are
-pure and jittable; they read the standard kinematic fields of one environment's
-``mjx.Data`` (``cdof``, ``cvel``, ``qacc``; vmap them for a batch) and return
-world-frame quantities for :class:`~mjx_damage.signals.LinkSignals`. Contact
-forces depend on a simulator's contact layout: each backend reads them
-(:mod:`mjx_damage.backends`).
+link's ancestor dofs). Reading signals from simulator state is elsewhere:
+link kinematics in :mod:`mjx_damage.kinematics`, contact forces (which depend
+on a simulator's contact layout) in each backend (:mod:`mjx_damage.backends`).
 """
 
 from __future__ import annotations
@@ -15,17 +12,16 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Optional
 
-import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
 
 from mjx_damage import config as C
 from mjx_damage import liquid as Lq
 from mjx_damage import temperature as T
-# Re-exported for callers of the old path (mjx_damage.wrapper); the contact layout is the backend's.
+# Re-exported for callers of the old paths (mjx_damage.wrapper imports them from here): contacts
+# are the backend's, link kinematics their own module. Drop once wrapper.py imports them there.
 from mjx_damage.backends.mjx_jax import contact_forces  # noqa: F401
+from mjx_damage.kinematics import link_acceleration, link_velocity  # noqa: F401
 from mjx_damage.params import DamageParams
 
 
@@ -109,39 +105,3 @@ def bind(model: mujoco.MjModel, config) -> Binding:
       thermal=T.build(model, binding, resolved.raw),
       liquid=Lq.build(model, binding, resolved.raw),
   )
-
-
-def _point_motion(binding: Binding, cvel6: jax.Array, cacc6: jax.Array, d: mjx.Data):
-  """Velocity and classical acceleration of each link COM from com-based spatial vectors."""
-  body = binding.link_body
-  r = d.xipos[body] - d.subtree_com[binding.link_root]
-  w, v0 = cvel6[:, :3], cvel6[:, 3:]
-  v = v0 + jnp.cross(w, r)
-  if cacc6 is None:
-    return v, None
-  alpha, a0 = cacc6[:, :3], cacc6[:, 3:]
-  # spatial → classical acceleration: add ω × v (as mj_objectAcceleration does)
-  return v, a0 + jnp.cross(alpha, r) + jnp.cross(w, v)
-
-
-def link_acceleration(binding: Binding, d: mjx.Data) -> jax.Array:
-  """Kinematic linear acceleration of each tracked link's COM, f32[L, 3], m/s², world frame.
-
-  Reads the state of ``d`` after ``mjx.forward`` and before integration (so
-  ``qacc`` is the acceleration the current contact forces produce). Gravity is
-  not part of it: a body at rest reads 0, a body in free fall reads g.
-  """
-  if binding.num_links == 0 or d.qvel.shape[-1] == 0:
-    return jnp.zeros((binding.num_links, 3), jnp.float32)
-  mask = jnp.asarray(binding.link_dofs)
-  s = d.cdof * d.qacc[:, None] + d.cdof_dot * d.qvel[:, None]  # [nv, 6]
-  cacc = mask @ s
-  cvel = d.cvel[binding.link_body]
-  return _point_motion(binding, cvel, cacc, d)[1]
-
-
-def link_velocity(binding: Binding, d: mjx.Data) -> jax.Array:
-  """Linear velocity of each tracked link's COM, f32[L, 3], m/s (as of the last forward pass)."""
-  if binding.num_links == 0:
-    return jnp.zeros((0, 3), jnp.float32)
-  return _point_motion(binding, d.cvel[binding.link_body], None, d)[0]

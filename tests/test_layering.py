@@ -25,6 +25,11 @@ BACKENDS = "mjx_damage.backends"
 # composes backends (physics), the env and wrapper built on that step.
 STEP_MODULES = ("mjx_damage.physics", "mjx_damage.env", "mjx_damage.wrapper")
 OUTSIDE = ("benchmarks", "tests")  # scripts and tests sit on top; no package imports them
+# The core modules that may import a backend: the package (its public names), the
+# MJX step that composes the MJX-JAX backend, and binding's re-export of
+# contact_forces for callers of its old path (drop it once wrapper.py imports
+# from mjx_damage.backends.mjx_jax).
+BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.binding")
 
 
 def discover(root: str, packages=LAYERS) -> dict[str, str]:
@@ -108,6 +113,9 @@ def layer_violations(root: str, packages=LAYERS) -> list[str]:
       where = f"{os.path.relpath(mods[m], root)}:{line}"
       if packages.index(_layer(t)) > rank:
         bad.append(f"{where}: {m} ({_layer(m)}) imports {t} ({_layer(t)}), a layer above it")
+      if t.startswith(BACKENDS + ".") and not m.startswith(BACKENDS + ".") and _layer(m) == "mjx_damage" \
+          and m not in BACKEND_USERS:
+        bad.append(f"{where}: core module {m} imports backend {t} (only {', '.join(BACKEND_USERS)} may)")
       if m.startswith(BACKENDS + "."):
         if t.startswith(BACKENDS + ".") and t != m:
           bad.append(f"{where}: backend {m} imports another backend, {t}")
@@ -196,6 +204,7 @@ def test_checker_flags_planted_violations(tmp_path):
       "mjx_damage/backends/a.py": "from mjx_damage import physics\nfrom . import b\n",
       "mjx_damage/backends/b.py": "",
       "mjx_damage/physics.py": "",
+      "mjx_damage/health.py": "from mjx_damage.backends import b\n",
       "tasks/thing.py": "from train.loop import run\n",
       "train/loop.py": "from apps import cli\nfrom ..train import other\n",
       "train/other.py": "import train.loop\n",
@@ -208,6 +217,7 @@ def test_checker_flags_planted_violations(tmp_path):
   assert "backend mjx_damage.backends.a imports another backend, mjx_damage.backends.b" in bad
   assert "backend mjx_damage.backends.a imports the step layer (mjx_damage.physics)" in bad
   assert "apps.cli imports benchmarks.x" in bad
+  assert "core module mjx_damage.health imports backend mjx_damage.backends.b" in bad
   assert ["train.loop", "train.other"] in import_cycles(root)
   clean = _tree(tmp_path / "clean", {"tasks/t.py": "import mjx_damage.core\n", "mjx_damage/core.py": ""})
   assert layer_violations(clean) == [] and import_cycles(clean) == []

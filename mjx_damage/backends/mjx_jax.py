@@ -9,6 +9,8 @@ so it is read here and nowhere else; the geom → link indices it needs are the
 backend-independent :class:`mjx_damage.binding.Binding`.
 
 Pure and jittable: one environment's ``mjx.Data`` in, arrays out (vmap for a batch).
+:func:`link_signals` is the backend's whole output, what
+:func:`mjx_damage.physics.apply_signals` consumes.
 """
 
 from __future__ import annotations
@@ -21,7 +23,10 @@ import numpy as np
 from mujoco import mjx
 from mujoco.mjx._src import support as mjx_support
 
-if TYPE_CHECKING:  # annotation only: the backend reads binding.geom_link, nothing else
+from mjx_damage.kinematics import link_acceleration
+from mjx_damage.signals import LinkSignals
+
+if TYPE_CHECKING:  # annotation only
   from mjx_damage.binding import Binding
 
 
@@ -54,3 +59,20 @@ def contact_forces(binding: Binding, m: mjx.Model, d: mjx.Data) -> tuple[jax.Arr
   link0 = jnp.where(geom[:, 0] >= 0, geom_link[geom[:, 0]], -1)
   link1 = jnp.where(geom[:, 1] >= 0, geom_link[geom[:, 1]], -1)
   return jnp.concatenate([world, -world]), jnp.concatenate([link1, link0])
+
+
+def link_signals(binding: "Binding", m: mjx.Model, d: mjx.Data, temperature: jax.Array,
+                 exposure: jax.Array) -> LinkSignals:
+  """:class:`LinkSignals` of one environment whose ``d`` has just been through ``mjx.forward``.
+
+  ``temperature`` f32[L] °C and ``exposure`` f32[L] particles come from the
+  core's temperature and liquid models (the simulator has neither).
+  """
+  forces, force_link = contact_forces(binding, m, d)
+  return LinkSignals(
+      forces=forces,
+      force_link=force_link,
+      link_acc=link_acceleration(binding, d),
+      temperature=temperature,
+      exposure=exposure,
+  )
