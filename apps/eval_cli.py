@@ -18,8 +18,7 @@ from train import evaluate as E
 
 def build_parser() -> argparse.ArgumentParser:
   ap = argparse.ArgumentParser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
-  ap.add_argument("--task", required=True, help="task name (registry tasks, or built-in: drop, push_boxes)")
-  ap.add_argument("--policy", required=True, help="scripted:safe | scripted:unsafe | random | zero | checkpoint:PATH")
+  R.add_task_policy_arguments(ap)
   ap.add_argument("--episodes", type=int, default=64)
   ap.add_argument("--seed", type=int, default=0)
   ap.add_argument("--fragility", type=float, default=1.0, help="thresholds ÷ f, scales × f (default 1)")

@@ -22,8 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
   ap = argparse.ArgumentParser(
       prog="mjx-damage render",
       description="Render a rollout: damaged links tinted red, health bars for every tracked entity.")
-  ap.add_argument("--task", required=True, help="task name (registry tasks, or built-in: drop, push_boxes)")
-  ap.add_argument("--policy", required=True, help="scripted:safe | scripted:unsafe | random | zero | checkpoint:PATH")
+  R.add_task_policy_arguments(ap)
   ap.add_argument("--out", required=True, help="output video, .mp4 or .gif")
   ap.add_argument("--steps", type=int, default=None, help="control steps (default: the task's episode length)")
   ap.add_argument("--seed", type=int, default=0)

@@ -89,6 +89,12 @@ def make_policy(spec: str, env) -> Policy:
   return train.load_policy(arg, env)
 
 
+def add_task_policy_arguments(ap) -> None:
+  """``--task`` and ``--policy`` (both required) on an ``argparse`` parser, as every command spells them."""
+  ap.add_argument("--task", required=True, help=f"task name (registry tasks, or built-in: {', '.join(BUILTIN_TASKS)})")
+  ap.add_argument("--policy", required=True, help=" | ".join(POLICY_SPECS))
+
+
 def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
   """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
   path = policy_spec.partition(":")[2]
