@@ -77,7 +77,7 @@ def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
   raise ValueError(f"policy: unknown policy {spec!r}; expected one of {', '.join(POLICY_SPECS)}")
 
 
-def make_policy(spec: str, env) -> Policy:
+def make_policy(spec: str, env) -> E.Policy:
   """A ``policy(state, rng) -> action`` for one env of ``env`` from a spec string."""
   kind, arg = parse_policy_spec(spec)
   if kind == "random":
