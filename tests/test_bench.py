@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from apps import bench
-from mjx_damage import bind, native
+from mjx_damage import bind
 from mjx_damage import reference as R
-from tasks import bench_table as S
+from mjx_damage.backends import native as native_backend
 from mjx_damage.signals import LinkSignals, evaluate
+from tasks import bench_table as S
 
 
 def _collide(m, g1, g2):
@@ -61,7 +62,7 @@ def test_reference_evaluators_match_library_formulas(pushed_state):
   mujoco.mj_rnePostConstraint(m, d)
   # acceleration via mj_objectAcceleration (+ gravity) = the library's kinematic acceleration
   acc6 = np.zeros(6)
-  lib_acc = native.link_acceleration(binding, d)
+  lib_acc = native_backend.link_acceleration(binding, d)
   for li, body in enumerate(binding.link_body):
     mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_BODY, int(body), acc6, 0)
     np.testing.assert_allclose(acc6[3:] + m.opt.gravity, lib_acc[li], rtol=1e-4, atol=1e-3)
@@ -69,7 +70,7 @@ def test_reference_evaluators_match_library_formulas(pushed_state):
   fragile = binding.params.with_fragility(50.0)
   pipe = R.ReferencePipeline(m, dataclasses.replace(binding, params=fragile), 1)
   ref = np.concatenate([ev.mechanical(m, d) for ev in pipe.evaluators])
-  forces, links = native.contact_forces(binding, m, d)
+  forces, links = native_backend.contact_forces(binding, m, d)
   sig = LinkSignals(forces, links, lib_acc, np.full(3, 22.0, np.float32), np.zeros(3, np.float32))
   lib = np.asarray(evaluate(sig, fragile).rate.mechanical)
   assert ref.max() > 0

@@ -11,6 +11,7 @@ from mujoco import mjx
 
 import mjx_damage as md
 from mjx_damage import native, physics
+from mjx_damage.backends import native as native_backend
 from tasks.drop import DROP_CONFIG, DropEnv, load_scene
 
 
@@ -125,8 +126,8 @@ def test_native_and_mjx_extract_the_same_signals():
     ds = native.substep(b, m, d, ds)
   assert ds.link_health[0] < 100  # an 8 cm drop damages the plate natively too
   mujoco.mj_forward(m, d)
-  f_n, l_n = native.contact_forces(b, m, d)
-  a_n = native.link_acceleration(b, d)
+  f_n, l_n = native_backend.contact_forces(b, m, d)
+  a_n = native_backend.link_acceleration(b, d)
   mx = mjx.put_model(m)
   dx = jax.jit(mjx.forward)(mx, mjx.put_data(m, d))
   f_x, l_x = md.contact_forces(b, mx, dx)

@@ -5,7 +5,11 @@ quantities of :class:`mjx_damage.signals.LinkSignals` (world-frame contact
 forces on tracked links, link accelerations and velocities). Everything after
 that (damage rates, health, temperature, liquid) is backend-independent core.
 
-* :mod:`mjx_damage.backends.mjx_jax`: MuJoCo MJX, JAX implementation.
+* :mod:`mjx_damage.backends.mjx_jax`: MuJoCo MJX, JAX implementation (jittable);
+* :mod:`mjx_damage.backends.native`: native MuJoCo ``MjData`` (numpy).
+
+The steps that drive a simulator and apply the damage are core:
+:mod:`mjx_damage.physics` (MJX) and :mod:`mjx_damage.native` (MuJoCo).
 
 Backends import the core's data types (``Binding``, ``LinkSignals``), never
 each other, never the step layer (``physics``, ``env``, ``wrapper``) and never
