@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_damage import physics
-from mjx_damage.demo import DropEnv
+from tasks.drop import DropEnv
 
 
 def timed(fn, args, steps):
@@ -74,7 +74,7 @@ def main(argv=None) -> int:
           f"{row['env_steps_per_s_damage_off']:>10,.0f}, ratio {row['on_off_ratio']:.3f}", flush=True)
   result = {
       "command": "python " + " ".join([os.path.relpath(__file__)] + (argv if argv is not None else sys.argv[1:])),
-      "scene": "mjx_damage/scenes/drop.xml (plate + mug on a counter, 2 tracked links)",
+      "scene": "tasks/drop.xml (plate + mug on a counter, 2 tracked links)",
       "control_step": f"{n_sub} physics substeps of {float(env.mj_model.opt.timestep) * 1e3:g} ms",
       "device": f"{device.platform}:{getattr(device, 'device_kind', '')}",
       "host": platform.node(),

@@ -1,7 +1,7 @@
 """Why 32 damageable free bodies cost what they cost: where the MJX step spends its time.
 
 Complements ``mjx-damage bench`` (which reports the throughput curves) with two
-measurements on the K-box table scene (:mod:`mjx_damage.scenes.bench_table`):
+measurements on the K-box table scene (:mod:`tasks.bench_table`):
 
 1. throughput (damage on and off) versus K for MuJoCo's ``<option jacobian>``
    "auto" (MJX goes sparse from nv >= 60, i.e. K >= 10 here) and "dense";
@@ -65,7 +65,7 @@ def time_stages(env, envs: int, reps: int, target_s: float) -> list[dict]:
   import jax.numpy as jnp
   from mujoco import mjx
 
-  from mjx_damage import bench
+  from apps import bench
 
   d, _, _ = bench.batched_initial_state(env, envs)
   m = env.sys
@@ -106,8 +106,8 @@ def main(argv=None) -> int:
   from mujoco import mjx
   from mujoco.mjx._src import support
 
-  from mjx_damage import bench
-  from mjx_damage.scenes import bench_table as S
+  from apps import bench
+  from tasks import bench_table as S
 
   for j in jacs + [j for j in args.stages_for.split(",") if j]:
     if j not in S.JACOBIANS:
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
 
   for jac in jacs:
     for k in ks:
-      env = bench.table_env(k, jacobian=jac)
+      env = S.table_env(k, jacobian=jac)
       sparse = support.is_sparse(env.sys)
       print(f"  jacobian={jac} K={k} nv={env.mj_model.nv} (mass matrix {'sparse' if sparse else 'dense'}) ...",
             flush=True)

@@ -46,10 +46,9 @@ def main(argv=None) -> int:
 
   from mjx_damage import plots
   from mjx_damage.render import render_rollout, write_video
-  from train.evaluate import make_policy
 
   env = tasks.make("place_plate")
-  policy = make_policy("scripted:unsafe", env)
+  policy = tasks.scripted_policy(env, "unsafe")
   steps = tasks.default_config("place_plate")["episode_length"]
   res = render_rollout(env, policy, steps=steps, seed=args.seed, width=args.width, height=args.height)
   traj, frames = res.trajectory, res.frames[0]

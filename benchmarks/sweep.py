@@ -32,11 +32,11 @@ def main(argv=None) -> int:
   import tasks
 
   task_list = args.tasks or ",".join(tasks.names())
-  import train.sweep as sweep
+  from apps import sweep_cli
 
   out = os.path.join(HERE, "results", f"sweep_{args.device}.json")
-  return sweep.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"]
-                    + SETTINGS[args.device] + ["--out", out] + extra)
+  return sweep_cli.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"]
+                        + SETTINGS[args.device] + ["--out", out] + extra)
 
 
 if __name__ == "__main__":

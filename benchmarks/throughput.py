@@ -1,6 +1,6 @@
 """Committed throughput benchmark settings per device: ``python benchmarks/throughput.py --device cpu|gpu``.
 
-Runs :mod:`mjx_damage.bench` with the sizes chosen so one run fits its time box
+Runs :mod:`apps.bench` with the sizes chosen so one run fits its time box
 (CPU ~15 min on the 2-core CI machine, GPU ≤ 10 min on one H100), and writes
 ``benchmarks/results/throughput_<device>.json`` and ``.png``. Extra arguments
 are passed through to ``mjx-damage bench`` (later ones win).
@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     print(f"--device {args.device} but JAX's default device is {platform}", file=sys.stderr)
     return 2
   out = os.path.join(HERE, "results", f"throughput_{args.device}.json")
-  from mjx_damage import bench
+  from apps import bench
 
   return bench.main(SETTINGS[args.device] + ["--out", out] + extra)
 

@@ -11,7 +11,7 @@ implementations in one process:
   per-world kernels), CG as in the bench scene and Newton, and Newton with
   MuJoCo's sleeping enabled (resting bodies stop being simulated).
 
-Scenes (``mjx_damage.scenes.bench_table``): K free boxes; 1 free box + K-1
+Scenes (``tasks.bench_table``): K free boxes; 1 free box + K-1
 mounted boxes; the pusher follows the bench's Lissajous sweep over the whole
 grid ("sweep") or a small circle at the grid centre ("local", so most boxes rest
 and can sleep).
@@ -62,8 +62,8 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
   import numpy as np
   from mujoco import mjx
 
-  from mjx_damage.bench import pusher_ctrl
-  from mjx_damage.scenes import bench_table as S
+  from tasks import bench_table as S
+  from tasks.bench_table import pusher_ctrl
 
   impl, solver, sleep = CONFIGS[config]
   m = S.table_scene(k, solver=solver, free=free)
@@ -124,7 +124,7 @@ def report_md(res: dict) -> str:
   lines = [f"# Entity scaling on MuJoCo Warp vs MJX-JAX ({res['device']})", "",
            f"Command: `{res['command']}`  ", f"Date: {res['date']}; versions: {json.dumps(res['versions'])}", "",
            "Raw physics (`mjx.step`, no damage), one physics step per iteration, batch "
-           f"{res['envs']}. Scene: `mjx_damage.scenes.bench_table` (K boxes, the first `free` with free joints, the "
+           f"{res['envs']}. Scene: `tasks.bench_table` (K boxes, the first `free` with free joints, the "
            "rest mounted; pusher on 2 slide joints). motion `sweep` = the bench's Lissajous over the whole grid, "
            "`local` = a 4 cm circle at the grid centre. How to run it on the GPU machine: the docstring of "
            "`benchmarks/warp_scaling.py`.", "",

@@ -20,11 +20,13 @@ _compat.install()
 _compat.import_mjx_quietly()
 _runtime.enable_compilation_cache()
 
-from mjx_damage.binding import Binding, bind, contact_forces, link_acceleration, link_velocity  # noqa: E402
+from mjx_damage.backends.mjx_jax import contact_forces  # noqa: E402
+from mjx_damage.binding import Binding, bind  # noqa: E402
 from mjx_damage.config import resolve  # noqa: E402
 from mjx_damage.env import DamageEnv  # noqa: E402
 from mjx_damage.fluid import fluid_damage  # noqa: E402
 from mjx_damage.health import MAX_HEALTH, entity_health  # noqa: E402
+from mjx_damage.kinematics import link_acceleration, link_velocity  # noqa: E402
 from mjx_damage.mechanical import mechanical_damage, mechanical_load  # noqa: E402
 from mjx_damage.params import (  # noqa: E402
     DEFAULT_TAU,

@@ -1,10 +1,10 @@
-"""Binding a damage config to a MuJoCo model, and extracting link signals from MJX data.
+"""Binding a damage config to a MuJoCo model: the index bookkeeping every backend needs.
 
 :func:`bind` runs once, in Python, before anything is compiled: it validates the
 config, and builds static index arrays (geom → tracked link → entity, each
-link's ancestor dofs). The extraction functions below are pure and jittable;
-they read one environment's ``mjx.Data`` (vmap them for a batch) and return
-world-frame quantities for :class:`~mjx_damage.signals.LinkSignals`.
+link's ancestor dofs). Reading signals from simulator state is elsewhere:
+link kinematics in :mod:`mjx_damage.kinematics`, contact forces (which depend
+on a simulator's contact layout) in each backend (:mod:`mjx_damage.backends`).
 """
 
 from __future__ import annotations
@@ -12,14 +12,16 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Optional
 
-import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
-from mujoco.mjx._src import support as mjx_support
 
 from mjx_damage import config as C
+from mjx_damage import liquid as Lq
+from mjx_damage import temperature as T
+# Re-exported for callers of the old paths (mjx_damage.wrapper imports them from here): contacts
+# are the backend's, link kinematics their own module. Drop once wrapper.py imports them there.
+from mjx_damage.backends.mjx_jax import contact_forces  # noqa: F401
+from mjx_damage.kinematics import link_acceleration, link_velocity  # noqa: F401
 from mjx_damage.params import DamageParams
 
 
@@ -89,9 +91,6 @@ def bind(model: mujoco.MjModel, config) -> Binding:
       adr, num = model.body_dofadr[b], model.body_dofnum[b]
       link_dofs[li, adr : adr + num] = 1.0
       b = model.body_parentid[b]
-  from mjx_damage import temperature as T  # local: modules build on binding
-  from mjx_damage import liquid as Lq
-
   binding = Binding(
       resolved=resolved,
       geom_link=geom_link,
@@ -106,70 +105,3 @@ def bind(model: mujoco.MjModel, config) -> Binding:
       thermal=T.build(model, binding, resolved.raw),
       liquid=Lq.build(model, binding, resolved.raw),
   )
-
-
-def contact_forces(binding: Binding, m: mjx.Model, d: mjx.Data) -> tuple[jax.Array, jax.Array]:
-  """World-frame contact forces on tracked links from one environment's active contacts.
-
-  Each contact loads both of its bodies, equal and opposite: the contact-frame
-  force is what ``geom[0]`` exerts on ``geom[1]``.
-
-  Returns:
-    forces: f32[2C, 3] N (C = contact slots of the model; inactive slots give 0).
-    force_link: i32[2C] link each force acts on, −1 for untracked bodies.
-  """
-  con = d._impl.contact
-  if con.dist.shape[0] == 0:
-    return jnp.zeros((0, 3), jnp.float32), jnp.zeros((0,), jnp.int32)
-  forces, rows = [], []
-  for dim in sorted(set(np.asarray(con.dim).tolist())):
-    f, idx = mjx_support.contact_force_dim(m, d, dim)
-    forces.append(f[:, :3])
-    rows.append(idx)
-  rows = np.concatenate(rows)
-  local = jnp.concatenate(forces)
-  frame = con.frame[rows].reshape(-1, 3, 3)  # rows: normal, tangent1, tangent2
-  world = jnp.einsum("kij,ki->kj", frame, local)
-  active = (con.dist[rows] - con.includemargin[rows]) < 0
-  world = jnp.where(active[:, None], world, 0.0)
-  geom = con.geom[rows]
-  geom_link = jnp.asarray(binding.geom_link)
-  link0 = jnp.where(geom[:, 0] >= 0, geom_link[geom[:, 0]], -1)
-  link1 = jnp.where(geom[:, 1] >= 0, geom_link[geom[:, 1]], -1)
-  return jnp.concatenate([world, -world]), jnp.concatenate([link1, link0])
-
-
-def _point_motion(binding: Binding, cvel6: jax.Array, cacc6: jax.Array, d: mjx.Data):
-  """Velocity and classical acceleration of each link COM from com-based spatial vectors."""
-  body = binding.link_body
-  r = d.xipos[body] - d.subtree_com[binding.link_root]
-  w, v0 = cvel6[:, :3], cvel6[:, 3:]
-  v = v0 + jnp.cross(w, r)
-  if cacc6 is None:
-    return v, None
-  alpha, a0 = cacc6[:, :3], cacc6[:, 3:]
-  # spatial → classical acceleration: add ω × v (as mj_objectAcceleration does)
-  return v, a0 + jnp.cross(alpha, r) + jnp.cross(w, v)
-
-
-def link_acceleration(binding: Binding, d: mjx.Data) -> jax.Array:
-  """Kinematic linear acceleration of each tracked link's COM, f32[L, 3], m/s², world frame.
-
-  Reads the state of ``d`` after ``mjx.forward`` and before integration (so
-  ``qacc`` is the acceleration the current contact forces produce). Gravity is
-  not part of it: a body at rest reads 0, a body in free fall reads g.
-  """
-  if binding.num_links == 0 or d.qvel.shape[-1] == 0:
-    return jnp.zeros((binding.num_links, 3), jnp.float32)
-  mask = jnp.asarray(binding.link_dofs)
-  s = d.cdof * d.qacc[:, None] + d.cdof_dot * d.qvel[:, None]  # [nv, 6]
-  cacc = mask @ s
-  cvel = d.cvel[binding.link_body]
-  return _point_motion(binding, cvel, cacc, d)[1]
-
-
-def link_velocity(binding: Binding, d: mjx.Data) -> jax.Array:
-  """Linear velocity of each tracked link's COM, f32[L, 3], m/s (as of the last forward pass)."""
-  if binding.num_links == 0:
-    return jnp.zeros((0, 3), jnp.float32)
-  return _point_motion(binding, d.cvel[binding.link_body], None, d)[0]

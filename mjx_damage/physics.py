@@ -18,7 +18,9 @@ from mujoco import mjx
 from mjx_damage import health as H
 from mjx_damage import liquid as Lq
 from mjx_damage import temperature as T
-from mjx_damage.binding import Binding, contact_forces, link_acceleration, link_velocity
+from mjx_damage.backends import mjx_jax
+from mjx_damage.binding import Binding
+from mjx_damage.kinematics import link_velocity
 from mjx_damage.params import DamageParams
 from mjx_damage.signals import Damage, LinkSignals, evaluate
 
@@ -94,18 +96,6 @@ def apply_signals(ds: DamageState, signals: LinkSignals, dt) -> DamageState:
   )
 
 
-def mjx_signals(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState) -> LinkSignals:
-  """Link signals of one environment whose ``d`` has just been through ``mjx.forward``."""
-  forces, force_link = contact_forces(binding, m, d)
-  return LinkSignals(
-      forces=forces,
-      force_link=force_link,
-      link_acc=link_acceleration(binding, d),
-      temperature=ds.temperature,
-      exposure=ds.exposure,
-  )
-
-
 def _integrate(m: mjx.Model, d: mjx.Data) -> mjx.Data:
   integ = m.opt.integrator
   if integ == mjx.IntegratorType.EULER:
@@ -123,7 +113,7 @@ def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState) -> tup
   dt = m.opt.timestep
   ds = T.advance(m, binding, d, ds, dt)
   ds = Lq.advance(m, binding, d, ds, dt)
-  ds = apply_signals(ds, mjx_signals(m, binding, d, ds), dt)
+  ds = apply_signals(ds, mjx_jax.link_signals(binding, m, d, ds.temperature, ds.exposure), dt)
   ds = ds.replace(link_vel=link_velocity(binding, d))
   return _integrate(m, d), ds
 

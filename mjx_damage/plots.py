@@ -1,4 +1,4 @@
-"""Plots of a rollout (health, contact loads, cost) and of a training log — PNG via matplotlib (Agg).
+"""Plots of a rollout (health, contact loads, cost) — PNG via matplotlib (Agg).
 
 From a :class:`mjx_damage.render.Trajectory` (``render_rollout(...).trajectory`` or
 ``mjx_damage.render.rollout(...)``)::
@@ -15,16 +15,15 @@ From a :class:`mjx_damage.render.Trajectory` (``render_rollout(...).trajectory``
   peak stress from above;
 * cost — damage per step (bars) and cumulative episode cost.
 
-From a training run's ``metrics.jsonl``: :func:`plot_training_log` (return and
-cost curves, success rates, and λ for PPO-Lagrangian) — drawn by
-:func:`train.plots.plot_training`, the figure training itself writes.
+Generic: any recorded :class:`~mjx_damage.trajectory.Trajectory`, no task and no
+trainer. A training run's curves are the trainer's figure
+(:func:`train.plots.plot_training`; ``mjx-damage render --training-log``:
+:mod:`apps.training_log`).
 """
 
 from __future__ import annotations
 
-import json
 import os
-from typing import Optional
 
 import numpy as np
 
@@ -133,49 +132,3 @@ def plot_rollout(traj, out_dir: str, *, env_index: int = 0, title: str = "") -> 
   fig.savefig(paths["rollout"], dpi=100)
   plt.close(fig)
   return paths
-
-
-# --------------------------------------------------------------------------------------
-# Training logs
-# --------------------------------------------------------------------------------------
-def find_training_log(path: str) -> str:
-  """``metrics.jsonl`` itself, or the one inside a run directory; ValueError if absent."""
-  p = os.fspath(path)
-  if os.path.isdir(p):
-    p = os.path.join(p, "metrics.jsonl")
-  if not os.path.isfile(p):
-    raise ValueError(f"training_log: no metrics.jsonl at {p!r}")
-  return p
-
-
-def read_training_log(path: str) -> tuple[list, Optional[float], str]:
-  """(rows of metrics.jsonl, PPO-Lagrangian budget ĉ or None, task name) of a training run.
-
-  The budget and task come from the run's ``config.json`` beside the log
-  (written by :func:`train.train`); without it, a run is taken as Lagrangian
-  when its rows carry a non-zero ``lagrange``, and its budget is then unknown (NaN).
-  """
-  p = find_training_log(path)
-  with open(p) as f:
-    rows = [json.loads(line) for line in f if line.strip()]
-  if not rows:
-    raise ValueError(f"training_log: {p!r} holds no rows")
-  budget, task = None, ""
-  cfg_path = os.path.join(os.path.dirname(p), "config.json")
-  if os.path.isfile(cfg_path):
-    with open(cfg_path) as f:
-      cfg = json.load(f)
-    budget = (cfg.get("config") or {}).get("budget")
-    task = cfg.get("task") or ""
-  elif any(r.get("lagrange") for r in rows):
-    budget = float("nan")
-  return rows, budget, task
-
-
-def plot_training_log(path: str, out: str, title: Optional[str] = None) -> str:
-  """PNG of a training run's curves (return, cost, success rates, λ for PPO-Lagrangian) at ``out``."""
-  from train.plots import plot_training
-
-  rows, budget, task = read_training_log(path)
-  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-  return plot_training(rows, out, title=task if title is None else title, budget=budget)

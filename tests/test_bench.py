@@ -8,10 +8,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_damage import bench, bind, native
+from apps import bench
+from mjx_damage import bind
 from mjx_damage import reference as R
-from mjx_damage.scenes import bench_table as S
+from mjx_damage.backends import native as native_backend
 from mjx_damage.signals import LinkSignals, evaluate
+from tasks import bench_table as S
 
 
 def _collide(m, g1, g2):
@@ -40,7 +42,7 @@ def pushed_state():
   d = mujoco.MjData(m)
   best, best_n = None, -1
   for _ in range(300):
-    d.ctrl[:] = bench.pusher_ctrl(d.time, S.sweep_radius(3))
+    d.ctrl[:] = S.pusher_ctrl(d.time, S.sweep_radius(3))
     mujoco.mj_step(m, d)
     mujoco.mj_forward(m, d)
     n = sum(1 for i in range(d.ncon) if "pusher" in (m.geom(d.contact[i].geom1).name, m.geom(d.contact[i].geom2).name))
@@ -60,7 +62,7 @@ def test_reference_evaluators_match_library_formulas(pushed_state):
   mujoco.mj_rnePostConstraint(m, d)
   # acceleration via mj_objectAcceleration (+ gravity) = the library's kinematic acceleration
   acc6 = np.zeros(6)
-  lib_acc = native.link_acceleration(binding, d)
+  lib_acc = native_backend.link_acceleration(binding, d)
   for li, body in enumerate(binding.link_body):
     mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_BODY, int(body), acc6, 0)
     np.testing.assert_allclose(acc6[3:] + m.opt.gravity, lib_acc[li], rtol=1e-4, atol=1e-3)
@@ -68,7 +70,7 @@ def test_reference_evaluators_match_library_formulas(pushed_state):
   fragile = binding.params.with_fragility(50.0)
   pipe = R.ReferencePipeline(m, dataclasses.replace(binding, params=fragile), 1)
   ref = np.concatenate([ev.mechanical(m, d) for ev in pipe.evaluators])
-  forces, links = native.contact_forces(binding, m, d)
+  forces, links = native_backend.contact_forces(binding, m, d)
   sig = LinkSignals(forces, links, lib_acc, np.full(3, 22.0, np.float32), np.zeros(3, np.float32))
   lib = np.asarray(evaluate(sig, fragile).rate.mechanical)
   assert ref.max() > 0
@@ -78,7 +80,7 @@ def test_reference_evaluators_match_library_formulas(pushed_state):
 def test_reference_timing_and_rollout_run(pushed_state):
   m, binding, _ = pushed_state
   q = np.tile(m.qpos0, (2, 1))
-  ctrl = lambda t: bench.pusher_ctrl(t, S.sweep_radius(3))
+  ctrl = lambda t: S.pusher_ctrl(t, S.sweep_radius(3))
   with_dmg = R.time_reference(m, binding, 2, q, ctrl, steps=5, damage=True)
   without = R.time_reference(m, binding, 2, q, ctrl, steps=5, damage=False)
   roll = R.time_rollout(m, 2, q, ctrl, steps=5, nthread=2)
@@ -136,7 +138,7 @@ def test_tracked_subset_of_a_fixed_scene():
     S.table_config(4, tracked=5)
   with pytest.raises(ValueError, match="jacobian"):
     S.table_scene_xml(2, jacobian="banded")
-  env = bench.table_env(4, tracked=2, jacobian="dense")
+  env = S.table_env(4, tracked=2, jacobian="dense")
   assert env.mj_model.nbody == 1 + 1 + 4 and len(env.damage_binding.entity_names) == 2
 
 
@@ -150,11 +152,11 @@ def test_mounted_boxes_add_no_dofs_and_still_take_damage_signals():
   with pytest.raises(ValueError, match="free"):
     S.table_scene_xml(3, free=4)
   with pytest.raises(ValueError, match="free"):
-    bench.table_env(3, free=0)  # box 0 is observed: it must be free
+    S.table_env(3, free=0)  # box 0 is observed: it must be free
   m_all, m_one = S.table_scene(3), S.table_scene(3, free=1)
   assert (m_all.nv, m_one.nv) == (2 + 3 * 6, 2 + 6)
   assert [int(m_one.body_weldid[m_one.body(f"box{i}").id]) for i in (1, 2)] == [0, 0]
-  env = bench.table_env(2, free=1)  # box0 free at x = -0.05, box1 mounted at x = +0.05
+  env = S.table_env(2, free=1)  # box0 free at x = -0.05, box1 mounted at x = +0.05
   d, ds, _ = bench.batched_initial_state(env, 1)
   box1 = env.damage_binding.entity_names.index("box1")
   target = jnp.array([0.05, 0.0], jnp.float32)  # drive the pusher into the mounted box

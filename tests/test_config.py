@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 import mjx_damage as md
-from mjx_damage import scenes
+from tasks.drop import load_scene
 
 GOOD = {
     "entities": {
@@ -21,7 +21,7 @@ GOOD = {
 
 @pytest.fixture(scope="module")
 def model():
-  return scenes.load("drop")
+  return load_scene()
 
 
 def test_object_params_tables():

@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 
 from mjx_damage import randomize
-from mjx_damage.bench import table_env
+from apps import eval_cli, resolve
+from apps import sweep_cli
+from tasks.bench_table import table_env
 from mjx_damage.wrapper import DamageWrapper
 import train.evaluate as E
 import train.sweep as S
@@ -145,9 +147,9 @@ def test_eval_cli_rejects_bad_arguments(argv, field, capsys, monkeypatch):
   def boom(*a, **k):
     raise AssertionError("built an env before validating the arguments")
 
-  monkeypatch.setattr(E, "make_task", boom)
+  monkeypatch.setattr(resolve, "make_task", boom)
   with pytest.raises(SystemExit) as exc:
-    E.main(argv)
+    eval_cli.main(argv)
   assert exc.value.code == 2
   assert f"{field}:" in capsys.readouterr().err
 
@@ -159,9 +161,9 @@ def test_python_api_rejects_bad_arguments():
     with pytest.raises(ValueError, match="^" + re.escape(field) + ":"):
       E.evaluate(object(), None, **kw)
   with pytest.raises(ValueError, match="^policy:"):
-    E.parse_policy_spec("zero:extra")
+    resolve.parse_policy_spec("zero:extra")
   with pytest.raises(ValueError, match="^task:"):
-    E.check_task("nope")
+    resolve.check_task("nope")
 
 
 def test_sweep_rejects_bad_arguments(capsys):
@@ -171,7 +173,7 @@ def test_sweep_rejects_bad_arguments(capsys):
                       (["--tasks", "push_boxes", "--seeds", "a"], "seeds"),
                       (["--tasks", "nope"], "task")):
     with pytest.raises(SystemExit):
-      S.main(argv)
+      sweep_cli.main(argv)
     assert f"{field}:" in capsys.readouterr().err
 
 
@@ -203,7 +205,7 @@ def test_randomizer_validates_ranges():
 
 def test_randomizer_draws_log_uniform_per_env():
   from mjx_damage import bind
-  from mjx_damage.scenes import bench_table
+  from tasks import bench_table
 
   binding = bind(bench_table.table_scene(3), bench_table.table_config(3))
   p0 = binding.params
@@ -224,7 +226,7 @@ def test_randomizer_draws_log_uniform_per_env():
 
 
 def test_randomizer_is_used_by_wrapper_at_reset():
-  from mjx_damage.demo import DropEnv
+  from tasks.drop import DropEnv
 
   fn = randomize.fragility_randomizer({"fragility": (2.0, 2.0)})
   env = DamageWrapper(DropEnv(), params_fn=fn)

@@ -18,6 +18,7 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 
+from apps import render_cli, training_log
 from mjx_damage import plots
 from mjx_damage import render as R
 
@@ -50,7 +51,7 @@ def gl():
 
 @pytest.fixture(scope="module")
 def drop(gl, tmp_path_factory):
-  from train.evaluate import make_policy, make_task
+  from apps.resolve import make_policy, make_task
 
   env = make_task("drop")
   policy = make_policy("zero", env)
@@ -171,18 +172,18 @@ def test_training_log_plot(tmp_path):
            "eval/safe_completion": 0.05 * i, "lagrange": 0.2 * i} for i in range(5)]
   (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
   (run / "config.json").write_text(json.dumps({"task": "place_plate", "config": {"budget": 5.0}}))
-  got_rows, budget, task = plots.read_training_log(str(run))
+  got_rows, budget, task = training_log.read_training_log(str(run))
   assert got_rows == rows and budget == 5.0 and task == "place_plate"
-  p = plots.plot_training_log(str(run), str(tmp_path / "curves.png"))
+  p = training_log.plot_training_log(str(run), str(tmp_path / "curves.png"))
   assert imageio.imread(p).shape[1] > 4 * 400  # four panels: return, cost, success, λ
   with pytest.raises(ValueError, match="training_log"):
-    plots.find_training_log(str(tmp_path / "nowhere"))
+    training_log.find_training_log(str(tmp_path / "nowhere"))
 
 
 # --- CLI ------------------------------------------------------------------------------------
 def test_cli_writes_gif_and_plots(drop, tmp_path, capsys):
   out = tmp_path / "cli.gif"
-  rc = R.main(["--task", "drop", "--policy", "zero", "--out", str(out), "--steps", "2", "--seed", str(SEED),
+  rc = render_cli.main(["--task", "drop", "--policy", "zero", "--out", str(out), "--steps", "2", "--seed", str(SEED),
                "--num-envs", str(NUM_ENVS), "--width", "96", "--height", "64", "--plots", str(tmp_path / "p")])
   assert rc == 0
   assert len(imageio.mimread(str(out))) == 3
@@ -204,7 +205,7 @@ def test_cli_writes_gif_and_plots(drop, tmp_path, capsys):
 ])
 def test_cli_rejects_bad_arguments(args, message, capsys):
   with pytest.raises(SystemExit) as e:
-    R.main(args)
+    render_cli.main(args)
   assert e.value.code == 2
   assert message in capsys.readouterr().err
 
@@ -224,7 +225,7 @@ def test_api_rejects_bad_arguments(drop):
 @pytest.mark.slow
 def test_place_plate_unsafe_reddens_plate_safe_does_not(gl):
   import tasks
-  from train.evaluate import make_policy
+  from apps.resolve import make_policy
 
   env = tasks.make("place_plate")
   model = R.mj_model_of(env)

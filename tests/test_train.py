@@ -106,7 +106,7 @@ def test_train_evaluate_is_the_module():
 
   import train.evaluate  # noqa: F401
   assert isinstance(train.evaluate, types.ModuleType) and train.evaluate is sys.modules["train.evaluate"]
-  assert callable(train.evaluate.evaluate) and train.evaluate_policy is train.evaluate.evaluate_policy
+  assert callable(train.evaluate.evaluate) and train.evaluate_policy is train.task_eval.evaluate_policy
 
 
 def test_lambda_rises_while_cost_exceeds_budget(smoke):

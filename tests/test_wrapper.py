@@ -11,7 +11,8 @@ from mujoco import mjx
 
 import mjx_damage as md
 from mjx_damage import native, physics
-from mjx_damage.demo import DROP_CONFIG, DropEnv
+from mjx_damage.backends import native as native_backend
+from tasks.drop import DROP_CONFIG, DropEnv, load_scene
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +64,7 @@ class ForeignDrop(Env):
   """A Brax env that knows nothing about damage: plain mjx.step in a hidden loop."""
 
   def __init__(self):
-    self.mj_model = md.demo.scenes.load("drop")
+    self.mj_model = load_scene()
     self.sys = mjx.put_model(self.mj_model)
     self.q = self.mj_model.jnt_qposadr[self.mj_model.joint("plate").id]
 
@@ -115,7 +116,7 @@ def _per_link(forces, links, L):
 
 def test_native_and_mjx_extract_the_same_signals():
   """Both backends read the same state alike: per-link net contact force and acceleration."""
-  m = md.demo.scenes.load("drop")
+  m = load_scene()
   b = md.bind(m, DROP_CONFIG)
   q = m.jnt_qposadr[m.joint("plate").id]
   d = mujoco.MjData(m)
@@ -125,8 +126,8 @@ def test_native_and_mjx_extract_the_same_signals():
     ds = native.substep(b, m, d, ds)
   assert ds.link_health[0] < 100  # an 8 cm drop damages the plate natively too
   mujoco.mj_forward(m, d)
-  f_n, l_n = native.contact_forces(b, m, d)
-  a_n = native.link_acceleration(b, d)
+  f_n, l_n = native_backend.contact_forces(b, m, d)
+  a_n = native_backend.link_acceleration(b, d)
   mx = mjx.put_model(m)
   dx = jax.jit(mjx.forward)(mx, mjx.put_data(m, d))
   f_x, l_x = md.contact_forces(b, mx, dx)

@@ -4,13 +4,13 @@
 gives back the trained policy as ``policy(state, rng) -> action`` for one env;
 ``train.evaluate_policy(task, policy, num_episodes=...)`` evaluates it.
 
-``train.evaluate`` is always the evaluation module (:mod:`train.evaluate`: the
-``mjx-damage eval`` CLI, ``Evaluator``, ``metrics``, ``evaluate(env, ...)``);
-this package exports no function of that name.
+``train.evaluate`` is always the evaluation module (:mod:`train.evaluate`:
+``Evaluator``, ``metrics``, ``evaluate(env, ...)``); this package exports no
+function of that name. ``evaluate_policy`` lives in :mod:`train.task_eval`.
 """
 
 from train import evaluate  # noqa: F401  (the module, bound before anything can shadow it)
-from train.evaluate import evaluate_policy  # noqa: F401
+from train.task_eval import evaluate_policy  # noqa: F401
 from train.ppo import (  # noqa: F401
     PPOConfig,
     TrainResult,

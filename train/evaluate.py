@@ -2,15 +2,14 @@
 
 Python API::
 
-    from train.evaluate import evaluate, make_policy, make_task
-    env = make_task("place_plate")
-    result = evaluate(env, make_policy("scripted:safe", env), episodes=256, seed=0)
+    import tasks
+    from train.evaluate import evaluate
+    env = tasks.make("place_plate")
+    result = evaluate(env, tasks.scripted_policy(env, "safe"), episodes=256, seed=0)
     result["metrics"]["safe_completion"]
 
-    # a task name / env instance and a trained policy → the flat summary
-    # (``train.evaluate_policy``; what training logs as ``eval/<key>``)
-    from train.evaluate import evaluate_policy
-    evaluate_policy("place_plate", train.load_policy(run_dir), num_episodes=1024)["safe_completion"]
+A task name and a trained policy → the flat summary that training logs as
+``eval/<key>``: ``train.evaluate_policy`` (:mod:`train.task_eval`).
 
 One call = ``jit(vmap over episodes of lax.scan over the episode length)``;
 an episode stops counting at its first ``done`` (its state is frozen there).
@@ -25,114 +24,41 @@ Episodes are sharded over all local devices (1-D mesh,
 :class:`jax.sharding.NamedSharding`).
 
 This module is the one place evaluation episodes are rolled out and
-summarised: the ``mjx-damage eval`` CLI, :mod:`train.sweep`, training's
-periodic and final evaluation (:mod:`train.ppo`) and :func:`evaluate_policy`.
-
-CLI: ``mjx-damage eval --task TASK --policy SPEC --episodes N [--fragility F]
-[--seed S] [--out result.json]``; policy specs: ``scripted:safe``,
-``scripted:unsafe``, ``random``, ``zero``, ``checkpoint:PATH``.
+summarised: the ``mjx-damage eval`` CLI (:mod:`apps.eval_cli`), :mod:`train.sweep`,
+training's periodic and final evaluation and ``train.evaluate_policy``. It takes
+an env and a ``policy(state, rng)``: it knows no trainer and resolves no names
+(task and policy names: :mod:`apps.resolve`).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import math
-import os
-import sys
 import time
 from typing import Callable, Optional, Sequence
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from mjx_damage.randomize import check_fragility
 
 Policy = Callable  # policy(state, rng) -> action f32[action_size], one env, jittable
 
-POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint:PATH")
 DEFAULT_PERCENTILES = (50.0, 90.0, 95.0)
-# Built-in tasks usable before/without the task registry: the core demo scene
-# (no actions) and the benchmark's pusher scene (2-D action), with their
-# episode lengths in env steps.
-BUILTIN_TASKS = {"drop": 50, "push_boxes": 50}
 
 
-# --- tasks ----------------------------------------------------------------------
+# --- episode length, policies ---------------------------------------------------
 
-def _registry():
-  try:
-    import tasks
-  except ImportError:
-    return None
-  return tasks if hasattr(tasks, "names") and hasattr(tasks, "make") else None
-
-
-def task_names() -> list[str]:
-  """Every name :func:`make_task` accepts: the registry's tasks and the built-ins."""
-  reg = _registry()
-  names = list(reg.names()) if reg is not None else []
-  return names + [n for n in BUILTIN_TASKS if n not in names]
-
-
-def check_task(name) -> str:
-  if not isinstance(name, str) or name not in task_names():
-    raise ValueError(f"task: unknown task {name!r}; tasks: {', '.join(task_names())}")
-  return name
-
-
-def make_task(name: str, **overrides):
-  """A DamageWrapper-wrapped env by name (registry first, then the built-ins)."""
-  check_task(name)
-  reg = _registry()
-  if reg is not None and name in reg.names():
-    return reg.make(name, **overrides)
-  from mjx_damage.wrapper import DamageWrapper
-
-  if name == "drop":
-    from mjx_damage.demo import DropEnv
-
-    return DamageWrapper(DropEnv(**overrides))
-  from mjx_damage.bench import table_env
-
-  return DamageWrapper(table_env(**{"k": 4, **overrides}))
-
-
-def episode_length_of(env, task: Optional[str] = None) -> int:
-  """Episode length in env steps: the env's ``episode_length``, the registry's default, or a built-in's."""
+def env_episode_length(env) -> int:
+  """The env's own ``episode_length`` (Brax wrappers forward the attribute); ValueError without one."""
   n = getattr(env, "episode_length", None)
-  reg = _registry()
-  if n is None and task is not None and reg is not None and hasattr(reg, "default_config"):
-    try:
-      n = reg.default_config(task).get("episode_length")
-    except (ValueError, KeyError):
-      n = None
-  if n is None and task in BUILTIN_TASKS:
-    n = BUILTIN_TASKS[task]
-  if n is None:
+  if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
     raise ValueError("episode_length: the env defines none; pass episode_length explicitly")
   return int(n)
 
 
-# --- policies -------------------------------------------------------------------
-
-def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
-  """``"scripted:safe"`` → ("scripted", "safe"); checks the spec's form (no env needed)."""
-  if not isinstance(spec, str):
-    raise ValueError(f"policy: expected a spec string ({', '.join(POLICY_SPECS)}), got {spec!r}")
-  kind, _, arg = spec.partition(":")
-  if kind in ("random", "zero") and not arg:
-    return kind, None
-  if kind == "scripted" and arg in ("safe", "unsafe"):
-    return kind, arg
-  if kind == "checkpoint" and arg:
-    if not os.path.exists(arg):
-      raise ValueError(f"policy: checkpoint {arg!r} does not exist")
-    return kind, arg
-  raise ValueError(f"policy: unknown policy {spec!r}; expected one of {', '.join(POLICY_SPECS)}")
-
-
 def random_policy(action_size: int) -> Policy:
   """Uniform actions in [−1, 1]^action_size (Brax's normalised action range)."""
-  import jax
-
   def policy(state, rng):
     return jax.random.uniform(rng, (action_size,), minval=-1.0, maxval=1.0)
 
@@ -152,41 +78,16 @@ def parametrized_policy(apply: Callable, params) -> Policy:
 
 
 def zero_policy(action_size: int) -> Policy:
-  import jax.numpy as jnp
-
   def policy(state, rng):
     return jnp.zeros((action_size,), jnp.float32)
 
   return policy
 
 
-def make_policy(spec: str, env) -> Policy:
-  """A ``policy(state, rng) -> action`` for one env of ``env`` from a spec string."""
-  kind, arg = parse_policy_spec(spec)
-  if kind == "random":
-    return random_policy(env.action_size)
-  if kind == "zero":
-    return zero_policy(env.action_size)
-  if kind == "scripted":
-    reg = _registry()
-    if reg is None or not hasattr(reg, "scripted_policy"):
-      raise ValueError(f"policy: {spec!r} needs the task registry's scripted_policy, which is unavailable")
-    return reg.scripted_policy(env, arg)
-  try:
-    import train
-
-    load = train.load_policy
-  except (ImportError, AttributeError):
-    raise ValueError(f"policy: {spec!r} needs train.load_policy, which is unavailable") from None
-  return load(arg, env)
-
-
 # --- the compiled rollout -----------------------------------------------------
 
 def episode_keys(seed: int, episodes: int):
   """PRNG key per episode, u32[episodes, 2]; episode i splits its key into (reset, actions)."""
-  import jax
-
   return jax.random.split(jax.random.PRNGKey(seed), episodes)
 
 
@@ -210,9 +111,6 @@ def run_episode(env, policy: Policy, episode_length: int, key, fragility):
   entity_health f32[N] (final, 0–100); success_final f32[]; task_return f32[]
   (sum of ``info["task_reward"]``, the env's reward before damage shaping).
   """
-  import jax
-  import jax.numpy as jnp
-
   reset_key, act_key = jax.random.split(key)
   state = with_fragility(env.reset(reset_key), fragility)
 
@@ -256,9 +154,6 @@ class Evaluator:
   """
 
   def __init__(self, env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None):
-    import jax
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
     if isinstance(episode_length, bool) or not isinstance(episode_length, int) or episode_length < 1:
       raise ValueError(f"episode_length: must be an int >= 1, got {episode_length!r}")
     self.env, self.policy, self.episode_length = env, policy, episode_length
@@ -289,8 +184,6 @@ class Evaluator:
 
     ``params``: the policy's weights for this call (default: ``policy.params``).
     """
-    import jax
-
     params = self.params if params is None else params
     if params is None:
       raise ValueError("params: the policy has no default weights; pass params=")
@@ -369,8 +262,6 @@ def scalar_metrics(m: dict) -> dict:
 
 def check_args(episodes, fragility, safe_threshold, percentiles=DEFAULT_PERCENTILES, seed=0) -> None:
   """Reject bad arguments with ``ValueError`` naming the field (before anything compiles)."""
-  from mjx_damage.randomize import check_fragility
-
   if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
     raise ValueError(f"episodes: must be an int >= 1, got {episodes!r}")
   if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -390,8 +281,7 @@ def check_args(episodes, fragility, safe_threshold, percentiles=DEFAULT_PERCENTI
 
 def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0,
              episode_length: Optional[int] = None, safe_threshold: float = 95.0,
-             percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None,
-             task: Optional[str] = None) -> dict:
+             percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None) -> dict:
   """Evaluate ``policy`` on ``env`` for ``episodes`` episodes in one compiled call.
 
   Args:
@@ -399,7 +289,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
     policy: ``policy(state, rng) -> action`` for one env (jittable).
     episodes: N >= 1. seed: episode i uses ``episode_keys(seed, N)[i]``.
     fragility: f > 0, one factor or f32[N] (one per episode).
-    episode_length: env steps per episode (default: the env's / task's).
+    episode_length: env steps per episode (default: the env's ``episode_length``).
     safe_threshold: final entity health above which a completed episode is safe.
     devices: devices to shard the episodes over (default all local devices).
 
@@ -407,7 +297,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
     {"metrics": :func:`metrics`, "per_episode": numpy arrays, "compile_s", "run_s"}.
   """
   check_args(episodes, fragility, safe_threshold, percentiles, seed)
-  T = episode_length if episode_length is not None else episode_length_of(env, task)
+  T = episode_length if episode_length is not None else env_episode_length(env)
   ev = Evaluator(env, policy, T, devices)
   t0 = time.perf_counter()
   per_ep = ev.run(episode_keys(seed, episodes), fragility)
@@ -421,32 +311,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
   }
 
 
-def evaluate_policy(task, policy: Policy, *, num_episodes: int = 1024, episode_length: Optional[int] = None,
-                    seed: int = 0, task_kwargs: Optional[dict] = None, fragility=1.0,
-                    devices: Optional[Sequence] = None) -> dict:
-  """:func:`evaluate` for a task as training takes it, returning the flat summary (:func:`scalar_metrics`).
-
-  ``task``: a registered task name, an env class path or a Brax env
-  (:func:`train.ppo.resolve_task`); ``policy(state, rng) -> action`` for one
-  env, e.g. :func:`train.load_policy` (its weights are passed as data). The
-  episode length defaults to the task's; safe completion uses the env's
-  DamageWrapper threshold. Exported as ``train.evaluate_policy``.
-  """
-  from train import ppo
-
-  for name, v in (("num_episodes", num_episodes), ("episode_length", episode_length)):
-    if v is None and name == "episode_length":
-      continue
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-      raise ValueError(f"{name}: must be a positive integer, got {v!r}")
-  env, _ = ppo.resolve_task(task, task_kwargs)
-  res = evaluate(env, policy, int(num_episodes), seed, fragility=fragility,
-                 episode_length=int(episode_length or ppo.task_episode_length(env)),
-                 safe_threshold=ppo.safe_threshold_of(env), devices=devices)
-  return scalar_metrics(res["metrics"])
-
-
-# --- CLI ------------------------------------------------------------------------
+# --- reporting ------------------------------------------------------------------
 
 def format_table(m: dict, title: str = "") -> str:
   """Human-readable table of :func:`metrics` output."""
@@ -466,67 +331,3 @@ def format_table(m: dict, title: str = "") -> str:
   lines = [title] if title else []
   lines += [f"{k:<{w}}  {v}" for k, v in rows]
   return "\n".join(lines)
-
-
-def _jsonable(x):
-  if isinstance(x, dict):
-    return {k: _jsonable(v) for k, v in x.items()}
-  if isinstance(x, np.ndarray):
-    return x.tolist()
-  if isinstance(x, (np.floating, np.integer)):
-    return x.item()
-  return x
-
-
-def build_parser() -> argparse.ArgumentParser:
-  ap = argparse.ArgumentParser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
-  ap.add_argument("--task", required=True, help="task name (registry tasks, or built-in: drop, push_boxes)")
-  ap.add_argument("--policy", required=True, help="scripted:safe | scripted:unsafe | random | zero | checkpoint:PATH")
-  ap.add_argument("--episodes", type=int, default=64)
-  ap.add_argument("--seed", type=int, default=0)
-  ap.add_argument("--fragility", type=float, default=1.0, help="thresholds ÷ f, scales × f (default 1)")
-  ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
-  ap.add_argument("--safe-threshold", type=float, default=95.0)
-  ap.add_argument("--out", default=None, help="write the result as JSON here")
-  ap.add_argument("--per-episode", action="store_true", help="include per-episode arrays in the JSON")
-  return ap
-
-
-def main(argv=None) -> int:
-  ap = build_parser()
-  args = ap.parse_args(argv)
-  try:  # everything the user gave is checked before a task is built or compiled
-    check_task(args.task)
-    parse_policy_spec(args.policy)
-    check_args(args.episodes, args.fragility, args.safe_threshold, seed=args.seed)
-    if args.episode_length is not None and args.episode_length < 1:
-      raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
-  except ValueError as e:
-    ap.error(str(e))
-  env = make_task(args.task)
-  policy = make_policy(args.policy, env)
-  t0 = time.perf_counter()
-  res = evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
-                 episode_length=args.episode_length, safe_threshold=args.safe_threshold, task=args.task)
-  wall = time.perf_counter() - t0
-  title = (f"{args.task} / {args.policy}: {args.episodes} episodes x {res['episode_length']} steps, "
-           f"fragility {args.fragility:g}, seed {args.seed}, {res['devices']} device(s), {wall:.1f} s incl. compile")
-  print(format_table(res["metrics"], title))
-  if args.out:
-    out = {
-        "task": args.task, "policy": args.policy, "episodes": args.episodes, "seed": args.seed,
-        "fragility": args.fragility, "episode_length": res["episode_length"],
-        "command": "mjx-damage eval " + " ".join(sys.argv[1:] if argv is None else argv),
-        "metrics": res["metrics"], "wall_s": wall,
-    }
-    if args.per_episode:
-      out["per_episode"] = _jsonable(res["per_episode"])
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w") as f:
-      json.dump(out, f, indent=1)
-    print(f"wrote {args.out}")
-  return 0
-
-
-if __name__ == "__main__":
-  sys.exit(main())

@@ -7,7 +7,7 @@ same episode keys are reused across levels (common random numbers: a level's
 difference is the fragility, not the draw). Every seed reuses the executable;
 the JSON records how many were compiled (1 per task × policy).
 
-CLI::
+CLI (:mod:`apps.sweep_cli`)::
 
     mjx-damage sweep --tasks place_plate --policies scripted:safe,scripted:unsafe \
         --seeds 0,1,2 --fragility 0.5,1,2,4 --episodes 64 --out sweep.json
@@ -19,38 +19,26 @@ over seeds).
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import sys
 import time
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
 import train.evaluate as E
-
-
-def _split(field: str, text: str) -> list[str]:
-  vals = [v.strip() for v in text.split(",") if v.strip()]
-  if not vals:
-    raise ValueError(f"{field}: give at least one value")
-  return vals
+from mjx_damage.randomize import check_fragility
 
 
 def check_sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int],
                 fragility: Sequence[float], episodes: int, safe_threshold: float = 95.0) -> None:
-  """Validate a sweep before anything is built or compiled (``ValueError`` naming the field)."""
-  from mjx_damage.randomize import check_fragility
+  """Validate a sweep before anything is built or compiled (``ValueError`` naming the field).
 
+  Task and policy names are the caller's to check (its ``make_env``/``make_policy``
+  know them: :mod:`apps.resolve` for the command line).
+  """
   if not tasks:
     raise ValueError("tasks: give at least one task")
-  for t in tasks:
-    E.check_task(t)
   if not policies:
     raise ValueError("policies: give at least one policy")
-  for p in policies:
-    E.parse_policy_spec(p)
   if not seeds:
     raise ValueError("seeds: give at least one seed")
   for i, s in enumerate(seeds):
@@ -62,8 +50,13 @@ def check_sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[i
 
 def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], fragility: Sequence[float],
           episodes: int, safe_threshold: float = 95.0, episode_length: Optional[int] = None,
-          devices=None, log=print, on_progress=None) -> dict:
+          devices=None, log=print, on_progress=None, *, make_env: Callable, make_policy: Callable,
+          episode_length_of: Callable = lambda env, task: E.env_episode_length(env)) -> dict:
   """Run the sweep; returns {"rows": aggregated rows, "runs": per-seed rows, "compiles": {...}}.
+
+  ``make_env(task) -> env`` and ``make_policy(spec, env) -> policy(state, rng)``
+  turn the names of ``tasks`` and ``policies`` into objects; ``episode_length_of(env,
+  task)`` gives a task's episode length when ``episode_length`` is None.
 
   ``on_progress(partial_result)`` is called after every (task, policy), so a
   long sweep that is interrupted keeps what it finished.
@@ -73,10 +66,10 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
   frag = np.repeat(levels, episodes)  # [levels × episodes]
   runs, rows, compiles = [], [], {}
   for task in tasks:
-    env = E.make_task(task)
-    T = episode_length or E.episode_length_of(env, task)
+    env = make_env(task)
+    T = episode_length or episode_length_of(env, task)
     for spec in policies:
-      ev = E.Evaluator(env, E.make_policy(spec, env), T, devices)
+      ev = E.Evaluator(env, make_policy(spec, env), T, devices)
       t0 = time.perf_counter()
       per_level = {float(f): [] for f in levels}
       for seed in seeds:
@@ -136,73 +129,3 @@ def markdown(rows: list[dict], safe_threshold: float) -> str:
                  f"{cell(r, 'SC', '.1f')} | {cell(r, 'avg_health', '.2f')} | {cell(r, 'zero_damage', '.1f')} | "
                  f"{cell(r, 'cost_mean', '.2f')} |")
   return "\n".join(lines) + "\n"
-
-
-def build_parser() -> argparse.ArgumentParser:
-  ap = argparse.ArgumentParser(prog="mjx-damage sweep", description="tasks x policies x seeds x fragility sweep")
-  ap.add_argument("--tasks", required=True, help="comma-separated task names")
-  ap.add_argument("--policies", default="scripted:safe,scripted:unsafe", help="comma-separated policy specs")
-  ap.add_argument("--seeds", default="0", help="comma-separated seeds")
-  ap.add_argument("--fragility", default="1", help="comma-separated fragility factors (> 0)")
-  ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
-  ap.add_argument("--episode-length", type=int, default=None)
-  ap.add_argument("--safe-threshold", type=float, default=95.0)
-  ap.add_argument("--out", default="sweep.json", help="JSON path; the markdown table goes beside it (.md)")
-  return ap
-
-
-def main(argv=None) -> int:
-  argv = list(sys.argv[1:] if argv is None else argv)
-  ap = build_parser()
-  args = ap.parse_args(argv)
-  try:
-    tasks = _split("tasks", args.tasks)
-    policies = _split("policies", args.policies)
-    try:
-      seeds = [int(s) for s in _split("seeds", args.seeds)]
-    except ValueError:
-      raise ValueError(f"seeds: expected comma-separated integers, got {args.seeds!r}") from None
-    try:
-      levels = [float(f) for f in _split("fragility", args.fragility)]
-    except ValueError:
-      raise ValueError(f"fragility: expected comma-separated numbers, got {args.fragility!r}") from None
-    check_sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold)
-    if args.episode_length is not None and args.episode_length < 1:
-      raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
-  except ValueError as e:
-    ap.error(str(e))
-  import jax
-
-  t0 = time.perf_counter()
-  md_path = os.path.splitext(args.out)[0] + ".md"
-  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-
-  def write(res, complete):
-    out = {
-        "command": "mjx-damage sweep " + " ".join(argv),
-        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-        "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
-        "num_devices": jax.device_count(),  # evaluation shards episodes over all of them
-        "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
-        "episodes": args.episodes, "safe_threshold": args.safe_threshold,
-        "executables_compiled": res["compiles"],
-        "wall_s": time.perf_counter() - t0, "complete": complete,
-        "rows": res["rows"], "runs": res["runs"],
-    }
-    with open(args.out, "w") as f:
-      json.dump(out, f, indent=1)
-    md = markdown(res["rows"], args.safe_threshold)
-    with open(md_path, "w") as f:
-      head = f"Command: `{out['command']}`\n\nDevice: {out['device']} x {out['num_devices']}; wall {out['wall_s']:.0f} s"
-      f.write(head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
-    return md
-
-  res = sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
-              on_progress=lambda r: write(r, False))
-  print("\n" + write(res, True))
-  print(f"wrote {args.out} and {md_path}")
-  return 0
-
-
-if __name__ == "__main__":
-  sys.exit(main())

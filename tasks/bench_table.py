@@ -1,8 +1,10 @@
-"""Benchmark scene generator: K damageable free boxes on a table, swept by a pusher.
+"""The benchmark scene: K damageable boxes on a table, swept by a pusher, and its env.
 
 ``table_scene_xml(k)`` writes the MJCF; ``table_scene(k)`` loads it;
 ``table_config(k)`` is the damage config tracking the K boxes (one entity, one
-link each). The scene is designed for throughput, the way a user should design
+link each); :class:`TableEnv` (``table_env(k)``) is the env on it, a small env
+with actions that tests and the throughput harness (:mod:`apps.bench`) use;
+:func:`pusher_ctrl` is the open-loop sweep the harness drives the pusher with. The scene is designed for throughput, the way a user should design
 a many-object scene for MJX:
 
 * the table top is a plane (the cheapest MJX collision: box-plane is 4 corner
@@ -29,8 +31,16 @@ any simulator's work grows at least linearly with them.
 from __future__ import annotations
 
 import math
+from typing import Optional
 
+import jax
+import jax.numpy as jnp
 import mujoco
+import numpy as np
+from brax.envs.base import State
+from mujoco import mjx
+
+from mjx_damage.env import DamageEnv
 
 BOX_HALF = 0.03  # m, half edge of each box
 SPACING = 0.1  # m, grid pitch of the boxes at reset
@@ -129,3 +139,83 @@ def table_config(k: int, tracked: int | None = None) -> dict:
       raise ValueError(f"tracked: must be an int in [1, k={k}], got {tracked!r}")
     cfg["track"] = [f"box{i}" for i in range(tracked)]
   return cfg
+
+
+CTRL_PERIOD_S = 2.0  # period of the pusher's Lissajous sweep
+
+
+def pusher_ctrl(t, radius: float, xp=np):
+  """Open-loop pusher target (m, f[2]) at time ``t`` (s): a Lissajous figure over the grid."""
+  w = 2 * math.pi / CTRL_PERIOD_S
+  return xp.stack([radius * xp.sin(w * t), 0.8 * radius * xp.sin(2 * w * t + 0.5)])
+
+
+class TableEnv(DamageEnv):
+  """K boxes on a table and a pusher; action f32[2] ∈ [−1, 1]² = pusher target / sweep radius.
+
+  ``free`` boxes (default all K) have free joints, the rest are mounted
+  (:func:`table_scene_xml`); box 0 is always free.
+
+  Success: box 0 pushed more than 5 cm from where it started. Observation
+  f32[5]: pusher xy, box 0 xyz (m). Reset jitters every free box by ±1 cm.
+  """
+
+  def __init__(self, k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
+               tracked: Optional[int] = None, jacobian: str = "auto", free: Optional[int] = None):
+    free = k if free is None else free
+    if not isinstance(free, int) or isinstance(free, bool) or not 1 <= free <= k:
+      raise ValueError(f"free: free boxes must be an int in [1, k={k}] (box 0 is observed), got {free!r}")
+    super().__init__(table_scene(k, solver=solver, jacobian=jacobian, free=free), table_config(k, tracked),
+                     n_substeps)
+    self.k = k  # boxes in the scene
+    self.free = free  # boxes 0..free-1 are free bodies, the rest mounted
+    self.tracked = k if tracked is None else tracked  # boxes whose damage is computed
+    self.jacobian = jacobian
+    self.radius = sweep_radius(k)
+    self.episode_length = int(episode_length)
+    m = self.mj_model
+    self._box_q = np.array([m.jnt_qposadr[m.joint(f"box{i}").id] for i in range(free)])
+    self._qpos0 = np.array(m.qpos0, np.float32)
+
+  @property
+  def observation_size(self) -> int:
+    return 5
+
+  @property
+  def action_size(self) -> int:
+    return 2
+
+  def initial_qpos(self, rng) -> jax.Array:
+    """f32[nq] reset configuration: free boxes on their grid, jittered ±1 cm in x and y."""
+    jit = jax.random.uniform(rng, (self.free, 2), minval=-0.01, maxval=0.01)
+    q = jnp.asarray(self._qpos0)
+    idx = jnp.asarray(self._box_q)
+    return q.at[idx].add(jit[:, 0]).at[idx + 1].add(jit[:, 1])
+
+  def reset(self, rng: jax.Array) -> State:
+    rng, qr = jax.random.split(rng)
+    # no forward pass here: every physics substep starts with one (keeps reset cheap to compile)
+    d = mjx.make_data(self.sys).replace(qpos=self.initial_qpos(qr))
+    info = {"damage_state": self.init_damage(rng), "box0_start": d.qpos[self._box_q[0] : self._box_q[0] + 2]}
+    z = jnp.zeros(())
+    return State(d, self._obs(d), z, z, {"success": z}, info)
+
+  def step(self, state: State, action: jax.Array) -> State:
+    ctrl = self.radius * jnp.clip(action, -1.0, 1.0)
+    d, ds = self.physics_step(state.pipeline_state, state.info["damage_state"], ctrl)
+    moved = jnp.linalg.norm(d.qpos[self._box_q[0] : self._box_q[0] + 2] - state.info["box0_start"])
+    success = (moved > 0.05).astype(jnp.float32)
+    info = dict(state.info, damage_state=ds)
+    metrics = dict(state.metrics, success=success)
+    return state.replace(pipeline_state=d, obs=self._obs(d), info=info, metrics=metrics)
+
+  def _obs(self, d):
+    b = self._box_q[0]
+    return jnp.concatenate([d.qpos[:2], d.qpos[b : b + 3]])
+
+
+def table_env(k: int = 1, n_substeps: int = 5, episode_length: int = 50, solver: str = "CG",
+              tracked: Optional[int] = None, jacobian: str = "auto", free: Optional[int] = None):
+  """A :class:`TableEnv` (a ``DamageEnv``) on the K-box scene, tracking ``tracked`` (default all) boxes,
+  ``free`` (default all) of them free bodies and the rest mounted."""
+  return TableEnv(k, n_substeps, episode_length, solver, tracked, jacobian, free)

@@ -1,7 +1,8 @@
 """``mjx-damage`` console script: one subcommand per job.
 
 Each subcommand lives in the module that owns the job and exposes
-``main(argv) -> int``; this file only dispatches, so importing it is cheap.
+``main(argv) -> int``; this file only dispatches, importing the chosen module
+when it runs, so ``mjx-damage --help`` starts without loading JAX.
 """
 
 from __future__ import annotations
@@ -10,12 +11,12 @@ import importlib
 import sys
 
 SUBCOMMANDS = {
-    "demo": ("mjx_damage.demo_cli", "damage-aware batched rollout of the built-in drop scene"),
-    "eval": ("train.evaluate", "evaluate a policy on a task for N episodes (table + JSON)"),
-    "sweep": ("train.sweep", "tasks x policies x seeds x fragility table (markdown + JSON)"),
+    "demo": ("apps.demo_cli", "damage-aware batched rollout of the built-in drop scene"),
+    "eval": ("apps.eval_cli", "evaluate a policy on a task for N episodes (table + JSON)"),
+    "sweep": ("apps.sweep_cli", "tasks x policies x seeds x fragility table (markdown + JSON)"),
     "train": ("train.cli", "PPO / PPO-Lagrangian training on a task"),
-    "bench": ("mjx_damage.bench", "throughput benchmark (JSON + PNG)"),
-    "render": ("mjx_damage.render", "render a rollout with damage tint and health bars"),
+    "bench": ("apps.bench.cli", "throughput benchmark (JSON + PNG)"),
+    "render": ("apps.render_cli", "render a rollout with damage tint and health bars"),
 }
 
 

@@ -22,11 +22,11 @@ def main(argv=None) -> int:
   if not args.max_height >= 0:
     ap.error("--max-height: must be >= 0")
 
-  import jax
+  import jax  # imported after parsing: keeps `--help` fast
   import jax.numpy as jnp
 
-  from mjx_damage.demo import DropEnv
   from mjx_damage.wrapper import DamageWrapper
+  from tasks.drop import DropEnv
 
   env = DamageWrapper(DropEnv(min_height=0.0, max_height=args.max_height))
   steps = max(1, int(round(args.seconds / env.dt)))

@@ -1,19 +1,25 @@
-"""The built-in demo: plates dropped from random heights onto a counter beside a resting mug.
+"""The demo scene: plates dropped from random heights onto a counter beside a resting mug.
 
 ``DropEnv`` is the smallest damage-tracking MJX env of the project (no robot,
-no actions); ``mjx-damage demo`` rolls out a batch of it under one
-``jax.jit(jax.vmap(...))`` and prints per-entity health.
+no actions; scene ``drop.xml`` beside this file); ``mjx-damage demo``
+(:mod:`apps.demo_cli`) rolls out a batch of it under one
+``jax.jit(jax.vmap(...))`` and prints per-entity health. It is a scene built on
+the core, like the tasks, so it lives here and not in ``mjx_damage``.
 """
 
 from __future__ import annotations
 
+import os
+
 import jax
 import jax.numpy as jnp
 from brax.envs.base import State
+import mujoco
 from mujoco import mjx
 
-from mjx_damage import scenes
 from mjx_damage.env import DamageEnv
+
+SCENE = os.path.join(os.path.dirname(__file__), "drop.xml")
 
 DROP_CONFIG = {
     "entities": {
@@ -24,13 +30,18 @@ DROP_CONFIG = {
 COUNTER_TOP = 0.42  # m, z of the counter's top face
 
 
+def load_scene() -> mujoco.MjModel:
+  """The drop scene's ``mujoco.MjModel`` (a counter, a plate on a free joint, a mug)."""
+  return mujoco.MjModel.from_xml_path(SCENE)
+
+
 class DropEnv(DamageEnv):
   """Plate released at rest from ``height`` ∈ [min_height, max_height] m above the counter."""
 
   def __init__(self, min_height: float = 0.02, max_height: float = 0.6, n_substeps: int = 5, config=None):
     if not 0 <= min_height <= max_height:
       raise ValueError(f"min_height/max_height: need 0 <= min <= max, got {min_height}, {max_height}")
-    super().__init__(scenes.load("drop"), config or DROP_CONFIG, n_substeps)
+    super().__init__(load_scene(), config or DROP_CONFIG, n_substeps)
     self.min_height, self.max_height = float(min_height), float(max_height)
     self._plate_q = self.mj_model.jnt_qposadr[self.mj_model.joint("plate").id]
 

@@ -1,0 +1,108 @@
+"""Names on the command line → objects: ``--task place_plate``, ``--policy scripted:safe|checkpoint:RUN|…``.
+
+Tasks: the registry's (:func:`tasks.names`) and two built-in scenes, ``drop``
+(:class:`tasks.drop.DropEnv`, no actions) and ``push_boxes`` (4 boxes of
+:mod:`tasks.bench_table`, a 2-D pusher). Policies: ``scripted:safe``,
+``scripted:unsafe`` (the task's scripted policy), ``random``, ``zero``,
+``checkpoint:PATH`` (a trained run, :func:`train.load_policy`). Every check
+raises ``ValueError("task: …")``/``("policy: …")`` before anything is built.
+This is the one module that knows all the names, so it sits at the top.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Optional
+
+import tasks
+import train
+from mjx_damage.wrapper import DamageWrapper
+from tasks.bench_table import table_env
+from tasks.drop import DropEnv
+from train import checkpoint as ckpt
+from train import evaluate as E
+
+POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint:PATH")
+# Built-in scenes usable as tasks, with their episode lengths in env steps.
+BUILTIN_TASKS = {"drop": 50, "push_boxes": 50}
+
+
+def task_names() -> list[str]:
+  """Every name :func:`make_task` accepts: the registry's tasks and the built-ins."""
+  names = list(tasks.names())
+  return names + [n for n in BUILTIN_TASKS if n not in names]
+
+
+def check_task(name) -> str:
+  if not isinstance(name, str) or name not in task_names():
+    raise ValueError(f"task: unknown task {name!r}; tasks: {', '.join(task_names())}")
+  return name
+
+
+def make_task(name: str, **overrides):
+  """A DamageWrapper-wrapped env by name (registry first, then the built-ins ``drop``, ``push_boxes``)."""
+  check_task(name)
+  if name in tasks.names():
+    return tasks.make(name, **overrides)
+  if name == "drop":
+    return DamageWrapper(DropEnv(**overrides))
+  return DamageWrapper(table_env(**{"k": 4, **overrides}))
+
+
+def episode_length_of(env, task: Optional[str] = None) -> int:
+  """Episode length in env steps: the env's ``episode_length``, the registry's default, or a built-in's."""
+  n = getattr(env, "episode_length", None)
+  if n is None and task in tasks.names():
+    n = tasks.default_config(task).get("episode_length")
+  if n is None and task in BUILTIN_TASKS:
+    n = BUILTIN_TASKS[task]
+  if n is None:
+    raise ValueError("episode_length: the env defines none; pass episode_length explicitly")
+  return int(n)
+
+
+def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
+  """``"scripted:safe"`` → ("scripted", "safe"); checks the spec's form (no env needed)."""
+  if not isinstance(spec, str):
+    raise ValueError(f"policy: expected a spec string ({', '.join(POLICY_SPECS)}), got {spec!r}")
+  kind, _, arg = spec.partition(":")
+  if kind in ("random", "zero") and not arg:
+    return kind, None
+  if kind == "scripted" and arg in ("safe", "unsafe"):
+    return kind, arg
+  if kind == "checkpoint" and arg:
+    if not os.path.exists(arg):
+      raise ValueError(f"policy: checkpoint {arg!r} does not exist")
+    return kind, arg
+  raise ValueError(f"policy: unknown policy {spec!r}; expected one of {', '.join(POLICY_SPECS)}")
+
+
+def make_policy(spec: str, env) -> E.Policy:
+  """A ``policy(state, rng) -> action`` for one env of ``env`` from a spec string."""
+  kind, arg = parse_policy_spec(spec)
+  if kind == "random":
+    return E.random_policy(env.action_size)
+  if kind == "zero":
+    return E.zero_policy(env.action_size)
+  if kind == "scripted":
+    return tasks.scripted_policy(env, arg)
+  return train.load_policy(arg, env)
+
+
+def add_task_policy_arguments(ap) -> None:
+  """``--task`` and ``--policy`` (both required) on an ``argparse`` parser, as every command spells them."""
+  ap.add_argument("--task", required=True, help=f"task name (registry tasks, or built-in: {', '.join(BUILTIN_TASKS)})")
+  ap.add_argument("--policy", required=True, help=" | ".join(POLICY_SPECS))
+
+
+def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
+  """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
+  path = policy_spec.partition(":")[2]
+  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+  try:
+    meta = ckpt.read_meta(file)
+  except Exception as e:  # not a readable checkpoint
+    raise ValueError(f"policy: cannot read checkpoint {file!r} ({e})") from e
+  if meta.get("task") not in (None, task):
+    raise ValueError(f"policy: checkpoint {path!r} was trained on task {meta['task']!r}, not {task!r}")
+  return dict(meta.get("task_kwargs") or {})

@@ -1,0 +1,96 @@
+"""``mjx-damage sweep``: tasks × policies × seeds × fragility → JSON + markdown table (:mod:`train.sweep`).
+
+    mjx-damage sweep --tasks place_plate --policies scripted:safe,scripted:unsafe \
+        --seeds 0,1,2 --fragility 0.5,1,2,4 --episodes 64 --out sweep.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import jax
+
+from apps import resolve as R
+from mjx_damage.io import write_json, write_text
+from train import sweep as S
+
+
+def _split(field: str, text: str) -> list[str]:
+  vals = [v.strip() for v in text.split(",") if v.strip()]
+  if not vals:
+    raise ValueError(f"{field}: give at least one value")
+  return vals
+
+
+
+def build_parser() -> argparse.ArgumentParser:
+  ap = argparse.ArgumentParser(prog="mjx-damage sweep", description="tasks x policies x seeds x fragility sweep")
+  ap.add_argument("--tasks", required=True, help="comma-separated task names")
+  ap.add_argument("--policies", default="scripted:safe,scripted:unsafe", help="comma-separated policy specs")
+  ap.add_argument("--seeds", default="0", help="comma-separated seeds")
+  ap.add_argument("--fragility", default="1", help="comma-separated fragility factors (> 0)")
+  ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
+  ap.add_argument("--episode-length", type=int, default=None)
+  ap.add_argument("--safe-threshold", type=float, default=95.0)
+  ap.add_argument("--out", default="sweep.json", help="JSON path; the markdown table goes beside it (.md)")
+  return ap
+
+
+def main(argv=None) -> int:
+  argv = list(sys.argv[1:] if argv is None else argv)
+  ap = build_parser()
+  args = ap.parse_args(argv)
+  try:
+    tasks = _split("tasks", args.tasks)
+    policies = _split("policies", args.policies)
+    try:
+      seeds = [int(s) for s in _split("seeds", args.seeds)]
+    except ValueError:
+      raise ValueError(f"seeds: expected comma-separated integers, got {args.seeds!r}") from None
+    try:
+      levels = [float(f) for f in _split("fragility", args.fragility)]
+    except ValueError:
+      raise ValueError(f"fragility: expected comma-separated numbers, got {args.fragility!r}") from None
+    S.check_sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold)
+    for t in tasks:
+      R.check_task(t)
+    for p in policies:
+      R.parse_policy_spec(p)
+    if args.episode_length is not None and args.episode_length < 1:
+      raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
+  except ValueError as e:
+    ap.error(str(e))
+  t0 = time.perf_counter()
+  md_path = os.path.splitext(args.out)[0] + ".md"
+
+  def write(res, complete):
+    out = {
+        "command": "mjx-damage sweep " + " ".join(argv),
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
+        "num_devices": jax.device_count(),  # evaluation shards episodes over all of them
+        "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
+        "episodes": args.episodes, "safe_threshold": args.safe_threshold,
+        "executables_compiled": res["compiles"],
+        "wall_s": time.perf_counter() - t0, "complete": complete,
+        "rows": res["rows"], "runs": res["runs"],
+    }
+    write_json(args.out, out, indent=1)
+    md = S.markdown(res["rows"], args.safe_threshold)
+    head = f"Command: `{out['command']}`\n\nDevice: {out['device']} x {out['num_devices']}; wall {out['wall_s']:.0f} s"
+    write_text(md_path, head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
+    return md
+
+  res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
+                on_progress=lambda r: write(r, False), make_env=R.make_task, make_policy=R.make_policy,
+                episode_length_of=R.episode_length_of)
+  print("\n" + write(res, True))
+  print(f"wrote {args.out} and {md_path}")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

@@ -1,0 +1,177 @@
+"""Recording a rollout: ``num_envs`` episodes through one compiled step, what frames and plots need.
+
+:func:`rollout` runs ``jit(vmap(policy + env.step))`` from a Python loop over
+time (so the step count is not baked into the program and any length reuses
+one compilation) and brings back, after each step, only what a frame and the
+plots read: positions, health, loads, cost (:class:`Trajectory`). Works on any
+:class:`~mjx_damage.wrapper.DamageWrapper` env; knows no task.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+@dataclasses.dataclass
+class Trajectory:
+  """A recorded rollout, numpy, time-major: index t = 0 is the reset state, t = k after k steps.
+
+  Per step (leading axes [T + 1, B]): ``qpos``, ``qvel``, ``mocap_pos``, ``mocap_quat``
+  (what a frame needs), ``entity_health`` [.., N], ``link_health`` [.., L],
+  ``f_par``/``f_perp`` [.., L] (peak contact loads of the step, N), ``cost`` (damage
+  of the step), ``reward``, ``success``, ``done``. Per env: ``alpha``, ``beta``,
+  ``mech_threshold`` [B, L] (mechanical parameters, for the load plot).
+  """
+
+  qpos: np.ndarray
+  qvel: np.ndarray
+  mocap_pos: np.ndarray
+  mocap_quat: np.ndarray
+  entity_health: np.ndarray
+  link_health: np.ndarray
+  f_par: np.ndarray
+  f_perp: np.ndarray
+  cost: np.ndarray
+  reward: np.ndarray
+  success: np.ndarray
+  done: np.ndarray
+  alpha: np.ndarray
+  beta: np.ndarray
+  mech_threshold: np.ndarray
+  entity_names: tuple
+  link_names: tuple
+  link_entity: np.ndarray
+  geom_link: np.ndarray
+  dt: float
+
+  @property
+  def steps(self) -> int:
+    return self.qpos.shape[0] - 1
+
+  @property
+  def num_envs(self) -> int:
+    return self.qpos.shape[1]
+
+  @property
+  def time(self) -> np.ndarray:
+    """Seconds since reset of each recorded state, f[T + 1]."""
+    return np.arange(self.steps + 1) * self.dt
+
+
+def _record(state, done_before):
+  """What one env's state contributes to a :class:`Trajectory` (traced, inside the step)."""
+  d, info = state.pipeline_state, state.info
+  ds = info["damage_state"]
+  live = 1.0 - done_before  # a finished (frozen) env adds no more cost
+  return {
+      "qpos": d.qpos, "qvel": d.qvel, "mocap_pos": d.mocap_pos, "mocap_quat": d.mocap_quat,
+      "entity_health": info["entity_health"], "link_health": info["link_health"],
+      "f_par": ds.f_par * live, "f_perp": ds.f_perp * live, "cost": info["cost"] * live,
+      "reward": state.reward * live, "success": state.metrics.get("success", jnp.zeros(())),
+      "done": jnp.maximum(done_before, state.done),
+  }
+
+
+class _Programs:
+  """The compiled reset and step of (env, policy, num_envs), reused across calls."""
+
+  def __init__(self, env, policy: Callable, num_envs: int):
+    self.env, self.policy, self.num_envs = env, policy, num_envs
+
+    def reset_one(key):
+      reset_key, act_key = jax.random.split(key)
+      state = env.reset(reset_key)
+      z = jnp.zeros((), jnp.float32)
+      return state, act_key, _record(state, z)
+
+    def step_one(state, act_key, done, t):
+      nxt = env.step(state, policy(state, jax.random.fold_in(act_key, t)))
+      # An env whose episode ended stays frozen at its final state (as train.evaluate does).
+      nxt = jax.tree.map(lambda a, b: jnp.where(done > 0, b, a), nxt, state)
+      rec = _record(nxt, done)
+      return nxt, rec["done"], rec
+
+    self.reset = jax.jit(jax.vmap(reset_one))
+    self.step = jax.jit(jax.vmap(step_one, in_axes=(0, 0, 0, None)))
+
+
+_PROGRAMS: "collections.OrderedDict" = collections.OrderedDict()
+_MAX_PROGRAMS = 4  # a few (env, policy) pairs stay compiled, e.g. safe and unsafe of one task
+
+
+def _programs(env, policy, num_envs) -> _Programs:
+  # Keyed by identity; the entry keeps env and policy alive so their ids are not reused.
+  key = (id(env), id(policy), num_envs)
+  if key in _PROGRAMS:
+    _PROGRAMS.move_to_end(key)
+  else:
+    _PROGRAMS[key] = _Programs(env, policy, num_envs)
+    while len(_PROGRAMS) > _MAX_PROGRAMS:
+      _PROGRAMS.popitem(last=False)
+  return _PROGRAMS[key]
+
+
+def positive_int(name, v):
+  if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+    raise ValueError(f"{name}: must be a positive integer, got {v!r}")
+  return int(v)
+
+
+def binding_of(env):
+  # DamageWrapper's binding (brax wrappers around it forward the attribute); a bare
+  # DamageEnv tracks damage but lacks the health/cost summaries that frames and plots read.
+  b = getattr(env, "binding", None)
+  if b is None:
+    raise ValueError("env: not damage-tracked: wrap it in mjx_damage.DamageWrapper (tasks.make does)")
+  return b
+
+
+def mj_model_of(env):
+  """The scene's ``mujoco.MjModel`` of a (wrapped) env."""
+  e = env
+  for _ in range(16):
+    m = getattr(e, "mj_model", None)
+    if m is not None:
+      return m
+    if not hasattr(e, "env"):
+      break
+    e = e.env
+  raise ValueError("env: exposes no mj_model (needed to render)")
+
+
+def rollout(env, policy: Callable, *, steps: int, seed: int = 0, num_envs: int = 1) -> Trajectory:
+  """Run ``num_envs`` episodes of ``steps`` control steps through one compiled step; record them.
+
+  ``env``: a :class:`~mjx_damage.wrapper.DamageWrapper`-wrapped env (e.g. ``tasks.make``);
+  ``policy(state, rng) -> action`` for one env. Env b's reset and action keys
+  come from ``split(PRNGKey(seed), num_envs)[b]``, as in :mod:`train.evaluate`.
+  """
+  steps, num_envs = positive_int("steps", steps), positive_int("num_envs", num_envs)
+  if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+    raise ValueError(f"seed: must be an integer, got {seed!r}")
+  if not callable(policy):
+    raise ValueError(f"policy: must be callable policy(state, rng) -> action, got {policy!r}")
+  binding = binding_of(env)
+  prog = _programs(env, policy, num_envs)
+  state, act_keys, rec = prog.reset(jax.random.split(jax.random.PRNGKey(int(seed)), num_envs))
+  done = rec["done"]
+  recs = [jax.device_get(rec)]
+  for t in range(steps):
+    state, done, rec = prog.step(state, act_keys, done, t)
+    recs.append(jax.device_get(rec))
+  stacked = {k: np.stack([np.asarray(r[k]) for r in recs]) for k in recs[0]}
+  params = jax.device_get(state.info["damage_state"].params)
+  return Trajectory(
+      **stacked,
+      alpha=np.asarray(params.alpha), beta=np.asarray(params.beta),
+      mech_threshold=np.asarray(params.mech_threshold),
+      entity_names=tuple(binding.entity_names), link_names=tuple(binding.link_names),
+      link_entity=np.asarray(binding.link_entity), geom_link=np.asarray(binding.geom_link),
+      dt=float(env.dt),
+  )
