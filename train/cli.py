@@ -75,7 +75,7 @@ CONFIG_FLAGS = (
     ("--policy-hidden", "policy_hidden_sizes", _ints, "e.g. 32,32,32,32"),
     ("--value-hidden", "value_hidden_sizes", _ints, "e.g. 256,256,256,256,256"),
     ("--activation", "activation", str, None),
-    ("--init-log-std", "init_log_std", _floats, "ARM,GRIPPER initial log-std (gripper = last action dim)"),
+    ("--init-log-std", "init_log_std", _floats, "ARM,GRIPPER initial log-std (gripper = last action dim); write --init-log-std=-0.5,-1.5"),
     ("--lr", "learning_rate", float, None),
     ("--anneal-lr", "anneal_learning_rate", _bool, "true: lr decays linearly to 0 over --timesteps"),
     ("--clip", "clipping_epsilon", float, None),
