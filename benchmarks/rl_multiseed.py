@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import shlex
@@ -188,7 +189,8 @@ def run_method(name: str, args, command: str, work: str) -> dict:
       "label": spec["label"], "method": name, "command": command, "train_kwargs": kw,
       "config": res.config.to_json(), "seeds": list(args.seeds), "per_seed": per_seed, "summary": summary,
       "env_steps_per_seed": res.env_steps, "wall_time_s": res.wall_time, "train_time_s": res.train_time,
-      "throughput_all_seeds": res.throughput, "final_eval_s": eval_s, "timings": res.timings,
+      "throughput_all_seeds": res.throughput if math.isfinite(res.throughput) else None,  # None: 1 iteration, none timed
+      "final_eval_s": eval_s, "timings": res.timings,
       "stopped_by_time_limit": res.stopped_early, "curves_src": os.path.join(run_dir, "curves.png"),
       "curves": curves, "history": res.history,
   }
@@ -199,6 +201,10 @@ def _pm(s, pct=True):
     return "—"
   f = (lambda x: f"{100 * x:.1f}") if pct else (lambda x: f"{x:.2f}")
   return f"{f(s['mean'])} ± {f(s['std'])} (min {f(s['min'])})"
+
+
+def _rate(x):
+  return "—" if x is None else f"{x:,.0f}"
 
 
 def write_results(base: str, payload: dict) -> None:
@@ -217,7 +223,7 @@ def write_results(base: str, payload: dict) -> None:
     t80 = "—" if t["mean"] is None else f"{t['mean']:.0f} ± {t['std']:.0f} ({t['n']}/{len(r['seeds'])})"
     lines.append(f"| {r['label']} | {','.join(map(str, r['seeds']))} | {_pm(s['completion'])} "
                  f"| {_pm(s['safe_completion'])} | {_pm(s['avg_env_health'], False)} "
-                 f"| {_pm(s['episode_cost'], False)} | {t80} | {r['throughput_all_seeds']:,.0f} "
+                 f"| {_pm(s['episode_cost'], False)} | {t80} | {_rate(r['throughput_all_seeds'])} "
                  f"| {r['env_steps_per_seed']:,} |")
   lines += ["", "## Per seed", "", "| method | seed | completion | safe completion | avg env health | episode cost "
             "| time to 80 % safe (s) | final λ |", "|---|---|---|---|---|---|---|---|"]

@@ -206,3 +206,35 @@ def test_train_evaluate_is_the_module():
 
   import train.evaluate  # noqa: F401
   assert isinstance(train.evaluate, types.ModuleType) and train.evaluate is sys.modules["train.evaluate"]
+
+
+def test_sigterm_writes_a_checkpoint_and_exits_130(env, tmp_path):
+  """SIGTERM mid-run: the iteration finishes, a checkpoint is written, SystemExit(130); resume continues it."""
+  import signal
+  import threading
+  import time
+
+  default = signal.getsignal(signal.SIGTERM)
+
+  def send_when_handled():  # only once train() has installed its handler (else SIGTERM would end pytest)
+    for _ in range(6000):
+      if signal.getsignal(signal.SIGTERM) is not default:
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+      time.sleep(0.01)
+
+  out = str(tmp_path / "killed")
+  kw = dict(seeds=SEEDS, budget=0.0, lagrange_lr=0.01, out_dir=out, **TINY)
+  t = threading.Thread(target=send_when_handled)
+  t.start()
+  with pytest.raises(SystemExit) as e:
+    train.train(env, num_timesteps=1000 * ITER, **kw)
+  t.join()
+  assert e.value.code == 130
+  assert signal.getsignal(signal.SIGTERM) is default  # handler restored
+  from train import checkpoint as ckpt
+  meta = ckpt.read_meta(os.path.join(out, ckpt.FILENAME))
+  done = meta["iteration"]
+  assert 1 <= done < 1000
+  res = train.train(env, num_timesteps=(done + 1) * ITER, resume=True, **kw)
+  assert res.iterations == done + 1
