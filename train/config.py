@@ -12,12 +12,16 @@ Presets (``PPOConfig.preset(name, **overrides)``, ``mjx-damage train --preset NA
   512×2 tanh, Gaussian + tanh squashing, initial log-std −0.5 (arm) / −1.5
   (gripper = last action dimension), lr 1e-3 linearly annealed to 0, rollout
   512 steps, 10 epochs × 8 minibatches, clip 0.2, entropy 0, value coef 0.5,
-  grad-norm 0.5, target KL 0.01 (epochs stop early), γ 0.99, GAE λ 0.95; the
-  paper used a handful of envs, here they are batched (256 by default).
-* ``legacy`` — this trainer's settings before the multi-seed rewrite (1024
-  envs, 8 minibatches, 4 epochs, entropy 1e-3, lr 3e-4, 256×2 networks); kept
-  so old runs can be reproduced. Too few SGD steps per sample: see
-  ``docs``/the RL closing note in train/README of the benchmark.
+  grad-norm 0.5, target KL 0.01 (epochs stop early), γ 0.99, GAE λ 0.95
+  (paper, table "PPO hyperparameters for Place Plate"). The paper trains one
+  env for 1e5 steps (≈ 195 rollouts of 512); here the rollout is batched over
+  256 envs (8 minibatches of 32 sequences × 512 steps).
+* ``legacy`` — this trainer's defaults before the multi-seed rewrite (1024
+  envs, 8 minibatches, 4 epochs, entropy 1e-3, lr 3e-4, 256×2 swish); kept so
+  the committed single-seed rows can be rerun (benchmarks/place_plate_rl.py).
+  Its GPU variant (16384 envs, 8 × 2048 sequences, 4 epochs) did 8× fewer SGD
+  steps per env step than ``playground`` and sat at 0 % completion for 30–60 M
+  env-steps on place_plate (benchmarks/rl_collapse_evidence.py).
 """
 
 from __future__ import annotations
@@ -80,8 +84,10 @@ class PPOConfig:
   lagrange_lr: float = 0.1
   lagrange_init: float = 0.0
   lagrange_max: float = 5.0
-  pid_kp: float = 0.05
-  pid_ki: float = 0.02
+  # PID gains for episode costs of O(1–100) health points against ĉ ≈ 2: K_P·e answers a violation at
+  # once; K_I = 0.01 needs Σe = λ_max/K_I = 500 to saturate, so a short costly start does not pin λ.
+  pid_kp: float = 0.1
+  pid_ki: float = 0.01
   pid_kd: float = 0.05
   num_eval_envs: int = 128
   eval_every: int = 0  # env steps between evaluations; 0 → only at the end
