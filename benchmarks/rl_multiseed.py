@@ -22,6 +22,10 @@ compile + final evaluation), results in $OUT, then one table::
     done
     python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid,paper}.json --tag h100
 
+Other tasks where the unsafe shortcut is tempting (issue 12 item 5), 3 seeds, one call per method::
+
+    python benchmarks/rl_multiseed.py --task pick_egg --methods task_only --seeds 0,1,2 --tag task_only --results-dir $OUT
+
 CPU plumbing check (learns nothing)::
 
     python benchmarks/rl_multiseed.py --num-envs 16 --budget-seconds 60 --seeds 0,1 --eval-episodes 16
@@ -71,12 +75,16 @@ def _ints(text):
 def parse(argv):
   p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--task", default="place_plate", help="registered task, or package.module:EnvClass")
-  p.add_argument("--obs-mode", default="paper", help="task obs_mode (registered tasks that have one)")
+  p.add_argument("--obs-mode", default=None,
+                 help="task obs_mode (default: paper for place_plate — the paper's 6-d observation and in-hand "
+                      "start — else the task's own)")
   p.add_argument("--methods", default="task_only,penalty,lagrangian,pid", help=f"comma-separated of {','.join(METHODS)}")
   p.add_argument("--seeds", type=_ints, default=(0, 1, 2, 3, 4))
   p.add_argument("--preset", default="playground", help="preset of the non-paper methods (train/config.py)")
   p.add_argument("--budget-seconds", type=float, default=300.0, help="training wall clock per method, compile incl.")
   p.add_argument("--timesteps", type=float, default=1e9, help="env steps per seed (upper bound; the budget stops first)")
+  p.add_argument("--paper-timesteps", type=float, default=1e7,
+                 help="env steps per seed of the paper methods: their lr anneals linearly to 0 over this many")
   p.add_argument("--num-envs", type=int, default=None, help="envs per seed (default: the preset's)")
   p.add_argument("--unroll-length", type=int, default=None, help="default: the preset's")
   p.add_argument("--damage-weight", type=float, default=2.0)
@@ -161,10 +169,12 @@ def run_method(name: str, args, command: str, work: str) -> dict:
   spec = method_spec(name, args)
   kw = {k: v for k, v in spec.items() if k != "label"}
   kw.update(size_overrides(spec["preset"], args))
-  task_kwargs = {"obs_mode": args.obs_mode} if ":" not in args.task and args.obs_mode else None
+  obs_mode = args.obs_mode or ("paper" if args.task == "place_plate" else None)
+  task_kwargs = {"obs_mode": obs_mode} if ":" not in args.task and obs_mode else None
   run_dir = os.path.join(work, name)
   print(f"== {name}: {spec['label']}, seeds {list(args.seeds)}, {args.budget_seconds:.0f} s", flush=True)
-  res = train.train(args.task, task_kwargs=task_kwargs, seeds=args.seeds, num_timesteps=int(args.timesteps),
+  steps = min(args.timesteps, args.paper_timesteps) if spec["preset"] == "paper" else args.timesteps
+  res = train.train(args.task, task_kwargs=task_kwargs, seeds=args.seeds, num_timesteps=int(steps),
                     eval_every=int(args.eval_every), num_eval_envs=args.eval_envs, checkpoint_every=0,
                     out_dir=run_dir, time_limit=args.budget_seconds, progress=True, **kw)
   env, _ = train.resolve_task(args.task, task_kwargs)
@@ -186,7 +196,7 @@ def run_method(name: str, args, command: str, work: str) -> dict:
   summary["time_to_80_safe_s"] = stats([p["time_to_80_safe_s"] for p in per_seed])
   curves = f"rl_{name}_curves.png"
   return {
-      "label": spec["label"], "method": name, "command": command, "train_kwargs": kw,
+      "label": spec["label"], "method": name, "command": command, "train_kwargs": kw, "task_kwargs": task_kwargs,
       "config": res.config.to_json(), "seeds": list(args.seeds), "per_seed": per_seed, "summary": summary,
       "env_steps_per_seed": res.env_steps, "wall_time_s": res.wall_time, "train_time_s": res.train_time,
       "throughput_all_seeds": res.throughput if math.isfinite(res.throughput) else None,  # None: 1 iteration, none timed
