@@ -238,3 +238,20 @@ def test_sigterm_writes_a_checkpoint_and_exits_130(env, tmp_path):
   assert 1 <= done < 1000
   res = train.train(env, num_timesteps=(done + 1) * ITER, resume=True, **kw)
   assert res.iterations == done + 1
+
+
+def test_paper_preset_initial_log_std_per_dimension():
+  """Brax's tanh-normal head has no std parameter: our init gives log-std −0.5 (arm) / −1.5 (gripper) in every state."""
+  from brax.training.acme import running_statistics
+
+  from train import networks as N
+  cfg = train.PPOConfig.preset("paper").validate()
+  assert (cfg.policy_hidden_sizes, cfg.activation, cfg.num_updates_per_batch, cfg.num_minibatches,
+          cfg.unroll_length, cfg.target_kl, cfg.entropy_cost, cfg.max_grad_norm) == ((512, 512), "tanh", 10, 8,
+                                                                                     512, 0.01, 0.0, 0.5)
+  net = N.make_networks(6, 4, cfg)
+  params = N.init_policy(net, cfg, 4, jax.random.PRNGKey(0))
+  obs = jax.random.normal(jax.random.PRNGKey(1), (64, 6)) * 3.0
+  logits = net.policy_network.apply(running_statistics.init_state(jnp.zeros((6,))), params, obs)
+  log_std = np.log(np.asarray(net.parametric_action_distribution.create_dist(logits).scale))
+  np.testing.assert_allclose(log_std, np.broadcast_to([-0.5, -0.5, -0.5, -1.5], log_std.shape), atol=1e-5)

@@ -7,10 +7,10 @@ surrogate, GAE with termination vs time-limit truncation, value loss, entropy),
 
 What is ours: a per-dimension initial log-std (the paper's −0.5 arm / −1.5
 gripper). Brax's tanh-normal policy has no std parameter to initialise — its
-scale comes out of the last layer — so :func:`init_policy` sets the bias of
-that layer's scale half to ``softplus⁻¹(exp(log_std))``; with the near-zero
-weights of the initial head the std starts at ``exp(log_std)`` (within the
-0.001 floor) and stays state-dependent afterwards.
+scale comes out of the last layer — so :func:`init_policy` zeroes the weights
+of that layer's scale half and sets its bias to ``softplus⁻¹(exp(log_std) −
+0.001)``: the std starts at exactly ``exp(log_std)`` in every state and may
+become state-dependent as it learns.
 """
 
 from __future__ import annotations
@@ -67,7 +67,8 @@ def init_policy(network: ppo_networks.PPONetworks, cfg: PPOConfig, action_size: 
   last = max(layers, key=lambda name: int(name.rsplit("_", 1)[-1]))  # MLP layers are hidden_0..hidden_n
   std = jnp.maximum(jnp.exp(log_std) - MIN_STD, 1e-6)
   bias = layers[last]["bias"].at[action_size:].set(std + jnp.log(-jnp.expm1(-std)))  # softplus⁻¹(std)
-  return {**params, "params": {**layers, last: {**layers[last], "bias": bias}}}
+  kernel = layers[last]["kernel"].at[:, action_size:].set(0.0)  # the same std in every state at first
+  return {**params, "params": {**layers, last: {**layers[last], "bias": bias, "kernel": kernel}}}
 
 
 def init_params(network, cfg: PPOConfig, action_size: int, key) -> ppo_losses.PPONetworkParams:
