@@ -89,7 +89,8 @@ def parse(argv):
   p.add_argument("--unroll-length", type=int, default=None, help="default: the preset's")
   p.add_argument("--damage-weight", type=float, default=2.0)
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
-  p.add_argument("--eval-every", type=float, default=1e6, help="env steps per seed between periodic evaluations")
+  p.add_argument("--eval-every", type=float, default=3e6,
+                 help="env steps per seed between periodic evaluations (each: S calls of --eval-envs episodes)")
   p.add_argument("--eval-envs", type=int, default=256, help="episodes per seed of each periodic evaluation")
   p.add_argument("--eval-episodes", type=int, default=1024, help="episodes per seed of the final evaluation")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
