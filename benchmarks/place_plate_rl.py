@@ -1,4 +1,8 @@
-"""Place Plate from scratch with PPO: task reward only vs damage penalty vs PPO-Lagrangian.
+"""Place Plate from scratch with PPO: task reward only vs damage penalty vs PPO-Lagrangian (single seed, old settings).
+
+Superseded by ``benchmarks/rl_multiseed.py`` (S seeds per method in one program, PID-Lagrangian,
+presets); kept so the committed single-seed rows can be rerun with the settings they were made with
+(``preset="legacy"`` plus the flags below). benchmarks/rl_collapse_evidence.py reads their histories.
 
 Reproduces the paper's RL experiment (DAMAGE_MODEL.md §8) with thousands of
 batched envs. Three runs, each evaluated on ``--eval-episodes`` episodes of the
@@ -290,7 +294,7 @@ def main(argv=None) -> int:
         break
     print(f"== {name}: {spec['label']}, time limit {limit:.0f} s", flush=True)
     res = train.train(
-        args.task, task_kwargs=task_kwargs, damage_weight=spec["damage_weight"], budget=spec["budget"],
+        args.task, preset="legacy", task_kwargs=task_kwargs, damage_weight=spec["damage_weight"], budget=spec["budget"],
         lagrange_lr=args.lagrange_lr, lagrange_max=args.lagrange_max, num_envs=args.num_envs, num_timesteps=args.timesteps, seed=args.seed,
         policy_hidden_sizes=args.policy_hidden_sizes, value_hidden_sizes=args.value_hidden_sizes,
         learning_rate=args.learning_rate, entropy_cost=args.entropy_cost, discounting=args.discounting,
@@ -310,7 +314,7 @@ def main(argv=None) -> int:
         "final_eval": res.final_eval, "env_steps": res.env_steps, "iterations": res.iterations,
         "wall_time_s": res.wall_time, "train_time_s": res.train_time, "throughput": res.throughput,
         "overall_steps_per_s": res.env_steps / res.wall_time, "time_to_80_safe_s": t80,
-        "env_steps_to_80_safe": s80, "final_lambda": float(res.train_state.lagrange),
+        "env_steps_to_80_safe": s80, "final_lambda": float(res.train_state.lagrange[0]),
         "timings": res.timings, "stopped_by_time_limit": res.stopped_early,
         "curves": os.path.basename(curves), "history": res.history,
     }

@@ -1,12 +1,13 @@
-"""Training: smoke run (train → checkpoint → load → evaluate), exact resume,
-Lagrange multiplier behaviour, argument validation, CLI.
+"""Training: smoke run (train → checkpoint → load → evaluate), S seeds in one program equal S single-seed
+runs, exact resume of a multi-seed run, corrupt checkpoints, multiplier behaviour, validation, CLI.
 
-All runs use the tiny PusherEnv with one shared config, so the training
-iteration and the evaluation compile once (the rest hits the persistent
-compilation cache; w, ĉ and lr_λ are traced values, not constants).
+All runs use the tiny PusherEnv with one config, so each seed count compiles its iteration once (the
+rest hits the persistent compilation cache; w, ĉ and the multiplier gains are traced values).
 """
 
 import json
+import sys
+import types
 import os
 
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
@@ -20,12 +21,13 @@ import train  # noqa: E402
 from train import ppo  # noqa: E402
 from train.experiments.pusher import PusherEnv  # noqa: E402
 
-# 16 envs × 8 steps = 128 env steps per iteration; episodes of 24 steps end every 3 iterations.
+# 16 envs × 8 steps = 128 env steps per iteration and seed; episodes of 24 steps end every 3 iterations.
 ITER = 128
-TINY = dict(num_envs=16, unroll_length=8, num_minibatches=2, num_updates_per_batch=2, episode_length=24,
-            policy_hidden_sizes=(16, 16), value_hidden_sizes=(16, 16), num_eval_envs=8,
-            learning_rate=1e-3, seed=3, progress=False)
-SMOKE_STEPS = 16 * ITER  # 2048 env steps
+TINY = dict(num_envs=16, unroll_length=8, num_minibatches=2, batch_size=8, num_updates_per_batch=2,
+            episode_length=24, policy_hidden_sizes=(16, 16), value_hidden_sizes=(16, 16), num_eval_envs=8,
+            learning_rate=1e-3, progress=False)
+SEEDS = (3, 4)
+SMOKE_STEPS = 8 * ITER
 
 
 @pytest.fixture(scope="module")
@@ -35,11 +37,10 @@ def env():
 
 @pytest.fixture(scope="module")
 def smoke(env, tmp_path_factory):
-  """PPO-Lagrangian with budget 0: every damaging episode pushes λ up."""
+  """Two seeds of PPO-Lagrangian with budget 0 in one program: every damaging episode pushes λ up."""
   out = str(tmp_path_factory.mktemp("smoke"))
-  res = train.train(env, budget=0.0, lagrange_lr=0.01, num_timesteps=SMOKE_STEPS,
-                    eval_every=8 * ITER, checkpoint_every=8 * ITER, out_dir=out, **TINY)
-  return res
+  return train.train(env, seeds=SEEDS, budget=0.0, lagrange_lr=0.01, num_timesteps=SMOKE_STEPS,
+                     eval_every=4 * ITER, checkpoint_every=4 * ITER, out_dir=out, **TINY)
 
 
 def _rows(out_dir):
@@ -47,26 +48,16 @@ def _rows(out_dir):
     return [json.loads(line) for line in f]
 
 
-def test_lagrange_update_rule():
-  up = ppo.lagrange_update(jnp.float32(1.0), 10.0, 4.0, 0.1, 100.0)
-  assert np.isclose(up, 1.6)  # cost above budget: λ rises by lr·(J_c − ĉ)
-  assert float(ppo.lagrange_update(jnp.float32(1.0), 0.0, 50.0, 0.1, 100.0)) == 0.0  # projected onto λ ≥ 0
-  assert float(ppo.lagrange_update(jnp.float32(99.0), 1e6, 0.0, 0.1, 100.0)) == 100.0  # capped
-  lam = jnp.float32(5.0)
-  for _ in range(20):  # far below budget: decays to exactly 0 and stays there
-    lam = ppo.lagrange_update(lam, 1.0, 3.0, 0.5, 100.0)
-  assert float(lam) == 0.0
+def _assert_trees_close(a, b, rtol=1e-5, atol=1e-6):
+  for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+    np.testing.assert_allclose(np.asarray(x, np.float64), np.asarray(y, np.float64), rtol=rtol, atol=atol)
 
 
 def test_shape_reward():
   r, c = jnp.array([1.0, -2.0, 0.5]), jnp.array([0.0, 3.0, 1e4])
-  # λ = 0: the paper's r − w·c exactly (penalty and task-only runs)
-  np.testing.assert_allclose(ppo.shape_reward(r, c, 2.0, 0.0), r - 2.0 * c)
-  # λ > 0: same task/cost trade-off, return scale bounded by 1/(1 + λ)
+  np.testing.assert_allclose(ppo.shape_reward(r, c, 2.0, 0.0), r - 2.0 * c)  # λ = 0: the paper's r − w·c
   lam = 9.0
-  shaped = ppo.shape_reward(r, c, 0.0, lam)
-  np.testing.assert_allclose(shaped, (r - lam * c) / 10.0, rtol=1e-6)
-  assert float(jnp.max(jnp.abs(shaped))) <= float(jnp.max(jnp.abs(r)) + jnp.max(c))
+  np.testing.assert_allclose(ppo.shape_reward(r, c, 0.0, lam), (r - lam * c) / 10.0, rtol=1e-6)
 
 
 def test_smoke_train_checkpoint_load_evaluate(smoke, env):
@@ -74,88 +65,123 @@ def test_smoke_train_checkpoint_load_evaluate(smoke, env):
   for f in ("config.json", "metrics.jsonl", "metrics.csv", "checkpoint.npz", "curves.png"):
     assert os.path.isfile(os.path.join(out, f)), f
   rows = _rows(out)
-  assert [r["env_steps"] for r in rows] == [8 * ITER, 16 * ITER]
-  assert smoke.env_steps == SMOKE_STEPS and smoke.iterations == 16
-  # the keys benchmarks/place_plate_rl.py reports (train.evaluate.SUMMARY_KEYS)
-  for k in ("completion", "safe_completion", "avg_env_health", "min_env_health", "episode_cost",
-            "zero_damage_rate", "task_return", "episode_length", "episodes"):
+  assert [(r["seed"], r["env_steps"]) for r in rows] == [(s, n * ITER) for n in (4, 8) for s in SEEDS]
+  assert smoke.env_steps == SMOKE_STEPS and smoke.iterations == 8
+  assert len(smoke.final_evals) == 2 and smoke.final_eval == smoke.final_evals[0]
+  for k in ("completion", "safe_completion", "avg_env_health", "episode_cost", "task_return", "episodes"):
     assert k in smoke.final_eval
-  assert 0.0 <= smoke.final_eval["safe_completion"] <= smoke.final_eval["completion"] <= 1.0
   assert np.isfinite(smoke.throughput) and smoke.throughput > 0
+  assert smoke.train_state.iteration.shape == (2,)
 
-  policy = train.load_policy(out, env=env)
   state = jax.jit(env.reset)(jax.random.PRNGKey(0))
-  # a DamageWrapper'd state works too: the policy reads only state.obs
-  a = jax.jit(policy)(state, jax.random.PRNGKey(1))
+  default = train.load_policy(out, env=env)
+  assert default.seed == SEEDS[0]
+  a = jax.jit(default)(state, jax.random.PRNGKey(1))
   assert a.shape == (1,) and bool(jnp.all(jnp.abs(a) <= 1.0))
   np.testing.assert_allclose(a, smoke.policy(state, jax.random.PRNGKey(1)), rtol=1e-6, atol=1e-6)
-  # deterministic by default: the rng does not matter
-  np.testing.assert_array_equal(a, jax.jit(policy)(state, jax.random.PRNGKey(7)))
-  batch = jax.vmap(policy)(jax.vmap(env.reset)(jax.random.split(jax.random.PRNGKey(0), 4)),
-                           jax.random.split(jax.random.PRNGKey(1), 4))
-  assert batch.shape == (4, 1)
+  np.testing.assert_array_equal(a, jax.jit(default)(state, jax.random.PRNGKey(7)))  # deterministic
+  second = train.load_policy(out, seed=SEEDS[1])
+  _assert_trees_close(second.params[1], jax.tree.map(lambda x: x[1], smoke.train_state.params.policy), 0, 0)
+  with pytest.raises(ValueError, match=r"^seed: 9 .*valid: 3, 4"):
+    train.load_policy(out, seed=9)
+  ev = train.evaluate_policy(env, default, num_episodes=8, episode_length=24, seed=0)
+  assert ev["episodes"] == 8 and 0.0 <= ev["avg_env_health"] <= 100.0
 
-  ev = train.evaluate_policy(env, policy, num_episodes=8, episode_length=24, seed=0)
-  assert ev["episodes"] == 8 and 0.0 <= ev["avg_env_health"] <= 100.0 and ev["episode_cost"] >= 0.0
+
+def test_seeds_in_one_program_equal_single_seed_runs(env):
+  """S = 2 in one vmapped program gives each seed the run it gets alone (same keys, same config)."""
+  kw = dict(budget=0.0, lagrange_lr=0.01, num_timesteps=3 * ITER, **TINY)
+  both = train.train(env, seeds=SEEDS, **kw)
+  for i, s in enumerate(SEEDS):
+    alone = train.train(env, seed=s, **kw)
+    _assert_trees_close(both.seed_state(i).params, alone.seed_state(0).params, rtol=2e-4, atol=1e-5)
+    _assert_trees_close(both.seed_state(i).env_state.obs, alone.seed_state(0).env_state.obs, rtol=2e-4, atol=1e-5)
+    np.testing.assert_allclose(both.train_state.lagrange[i], alone.train_state.lagrange[0], rtol=1e-4, atol=1e-6)
+  # the seeds really differ (a broadcast bug would make them equal)
+  assert not np.allclose(both.seed_state(0).env_state.obs, both.seed_state(1).env_state.obs)
 
 
 def test_train_evaluate_is_the_module():
-  """``train.evaluate`` is the evaluation module whatever was imported first (no function shadows it)."""
-  import sys
-  import types
-
   import train.evaluate  # noqa: F401
   assert isinstance(train.evaluate, types.ModuleType) and train.evaluate is sys.modules["train.evaluate"]
   assert callable(train.evaluate.evaluate) and train.evaluate_policy is train.task_eval.evaluate_policy
 
 
+def test_resume_of_a_multi_seed_run_equals_uninterrupted(smoke, env, tmp_path):
+  out = str(tmp_path / "resumed")
+  kw = dict(seeds=SEEDS, budget=0.0, lagrange_lr=0.01, eval_every=4 * ITER, checkpoint_every=4 * ITER,
+            out_dir=out, **TINY)
+  first = train.train(env, num_timesteps=4 * ITER, **kw)  # "interrupted" after its checkpoint at 4 iterations
+  assert first.iterations == 4
+  with open(os.path.join(out, "metrics.jsonl"), "a") as f:  # a row logged after the checkpoint is dropped
+    f.write(json.dumps({"seed": 3, "iteration": 6, "env_steps": 6 * ITER}) + "\n")
+  second = train.train(env, num_timesteps=SMOKE_STEPS, resume=True, **kw)
+  assert second.iterations == 8
+  _assert_trees_close(smoke.train_state.params, second.train_state.params)
+  _assert_trees_close(smoke.train_state.multiplier, second.train_state.multiplier)
+  _assert_trees_close(smoke.train_state.env_state.obs, second.train_state.env_state.obs)
+  ra, rb = _rows(smoke.out_dir), _rows(out)
+  assert [(r["seed"], r["iteration"]) for r in rb] == [(s, n) for n in (4, 8) for s in SEEDS]
+  for x, y in zip(ra, rb):
+    for k in ("eval/episode_cost", "eval/task_return", "train/episode_cost", "lagrange"):
+      np.testing.assert_allclose(x[k], y[k], rtol=1e-4, atol=1e-5)
+
+
+def test_corrupt_checkpoint_raises_naming_the_file(smoke, tmp_path):
+  from train import checkpoint as ckpt
+
+  src = os.path.join(smoke.out_dir, ckpt.FILENAME)
+  data = open(src, "rb").read()
+  bad = tmp_path / "checkpoint.npz"
+  bad.write_bytes(data[: len(data) // 2])  # a copy cut half-way
+  with pytest.raises(ValueError, match=r"^checkpoint: .*checkpoint\.npz is truncated or corrupt"):
+    train.load_policy(str(tmp_path))
+  bad.write_bytes(b"not a zip file at all")
+  with pytest.raises(ValueError, match=r"^checkpoint: .*truncated or corrupt"):
+    ckpt.read_meta(str(bad))
+
+
 def test_lambda_rises_while_cost_exceeds_budget(smoke):
-  costs = [r["cost_estimate"] for r in smoke.history]
-  lams = [r["lagrange"] for r in smoke.history]
-  assert max(costs) > 0.0, "the random pusher should damage the vase"
-  assert lams[-1] > 0.0 and lams[-1] >= lams[0]
+  for s in SEEDS:
+    rows = [r for r in smoke.history if r["seed"] == s]
+    assert max(r["cost_estimate"] for r in rows) > 0.0, "the random pusher should damage the vase"
+    assert rows[-1]["lagrange"] > 0.0 and rows[-1]["lagrange"] >= rows[0]["lagrange"]
 
 
 def test_lambda_decays_to_zero_far_below_budget(env):
-  res = train.train(env, budget=1e4, lagrange_init=3.0, lagrange_lr=0.01, num_timesteps=4 * ITER, **TINY)
-  lam = float(res.train_state.lagrange)
-  assert res.history[-1]["cost_estimate"] < 1e4
-  assert lam == 0.0
+  res = train.train(env, seeds=SEEDS, budget=1e4, lagrange_init=3.0, lagrange_lr=0.01, num_timesteps=4 * ITER,
+                    **TINY)
+  assert np.all(np.asarray(res.train_state.lagrange) == 0.0)
 
 
-def test_resume_equals_uninterrupted(smoke, env, tmp_path):
-  out = str(tmp_path / "resumed")
-  kw = dict(budget=0.0, lagrange_lr=0.01, eval_every=8 * ITER, checkpoint_every=8 * ITER, out_dir=out, **TINY)
-  first = train.train(env, num_timesteps=8 * ITER, **kw)  # "interrupted" after its checkpoint at 8 iterations
-  assert first.iterations == 8
-  with open(os.path.join(out, "metrics.jsonl"), "a") as f:  # a row logged after the checkpoint is dropped
-    f.write(json.dumps({"iteration": 12, "env_steps": 12 * ITER}) + "\n")
-  second = train.train(env, num_timesteps=SMOKE_STEPS, resume=True, **kw)
-  assert second.iterations == 16
-  a, b = smoke.train_state, second.train_state
-  for x, y in zip(jax.tree.leaves(a.params), jax.tree.leaves(b.params)):
-    np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6)
-  np.testing.assert_allclose(a.lagrange, b.lagrange, rtol=1e-5, atol=1e-6)
-  np.testing.assert_allclose(a.env_state.obs, b.env_state.obs, rtol=1e-5, atol=1e-6)
-  ra, rb = _rows(smoke.out_dir), _rows(out)
-  assert [r["iteration"] for r in rb] == [8, 16]
-  for k in ("eval/episode_cost", "eval/task_return", "train/episode_cost", "lagrange"):
-    np.testing.assert_allclose(ra[-1][k], rb[-1][k], rtol=1e-4, atol=1e-5)
+def test_pid_multiplier_run_stays_in_range(env):
+  """PID-Lagrangian through the same compiled iteration (the kind is data): λ in [0, λ_max]."""
+  res = train.train(env, seeds=SEEDS, budget=0.0, multiplier="pid", pid_kp=0.5, pid_ki=0.1, pid_kd=0.1,
+                    lagrange_max=2.0, num_timesteps=4 * ITER, **TINY)
+  lam = np.asarray(res.train_state.lagrange)
+  assert np.all((lam >= 0.0) & (lam <= 2.0))
+  assert np.any(lam > 0.0)  # the random pusher exceeds a zero budget
 
 
 @pytest.mark.parametrize("kwargs,name", [
     (dict(budget=-1.0), "budget"),
     (dict(num_envs=0), "num_envs"),
-    (dict(num_envs=12, num_minibatches=8), "num_envs"),
+    (dict(num_envs=12, num_minibatches=8, batch_size=None), "num_envs"),
     (dict(num_envs=16, num_minibatches=2, batch_size=12), "num_envs"),
     (dict(damage_weight=-2.0), "damage_weight"),
     (dict(learning_rate=0.0), "learning_rate"),
     (dict(policy_hidden_sizes=()), "policy_hidden_sizes"),
+    (dict(multiplier="pd"), "multiplier"),
+    (dict(seeds=(1, 1)), "seeds"),
+    (dict(seeds=()), "seeds"),
+    (dict(init_log_std=(0.0,)), "init_log_std"),
+    (dict(preset="nope"), "preset"),
+    (dict(no_such_field=1), "no_such_field"),
     (dict(resume=True), "resume"),
     (dict(time_limit=-5), "time_limit"),
 ])
 def test_invalid_arguments(kwargs, name):
-  args = dict(num_envs=16, num_timesteps=1000, progress=False)
+  args = dict(num_envs=16, batch_size=8, num_minibatches=2, num_timesteps=1000, progress=False)
   args.update(kwargs)
   with pytest.raises(ValueError, match=rf"^{name}:"):
     train.train("train.experiments.pusher:PusherEnv", **args)
@@ -163,15 +189,77 @@ def test_invalid_arguments(kwargs, name):
 
 def test_unknown_task():
   with pytest.raises(ValueError, match=r"^task: .*no_such_task"):
-    train.train("no_such_task", num_envs=16, num_timesteps=1000, progress=False)
+    train.train("no_such_task", num_envs=16, batch_size=8, num_minibatches=2, num_timesteps=1000, progress=False)
   with pytest.raises(ValueError, match=r"^task:"):
-    train.train(object(), num_envs=16, num_timesteps=1000, progress=False)
+    train.train(object(), num_envs=16, batch_size=8, num_minibatches=2, num_timesteps=1000, progress=False)
 
 
-def test_cli_errors(capsys):
+def test_cli_errors_and_flags(capsys):
   from train import cli
   assert cli.main(["--task", "no_such_task", "--out", "/tmp/x", "--no-progress"]) == 2
   assert "task: unknown task" in capsys.readouterr().err
   assert cli.main(["--task", "train.experiments.pusher:PusherEnv", "--out", "/tmp/x", "--budget", "-1",
                    "--no-progress"]) == 2
   assert "budget:" in capsys.readouterr().err
+  args, config = cli.split_args(vars(cli.build_parser().parse_args(
+      ["--task", "t", "--out", "o", "--seeds", "0,1,2", "--preset", "paper", "--multiplier", "pid",
+       "--init-log-std=-0.5,-1.5", "--timesteps", "1e6"])))
+  assert args["seeds"] == (0, 1, 2) and args["preset"] == "paper"
+  assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000}
+
+
+def test_train_evaluate_is_the_module():
+  import sys
+  import types
+
+  import train.evaluate  # noqa: F401
+  assert isinstance(train.evaluate, types.ModuleType) and train.evaluate is sys.modules["train.evaluate"]
+
+
+def test_sigterm_writes_a_checkpoint_and_exits_130(env, tmp_path):
+  """SIGTERM mid-run: the iteration finishes, a checkpoint is written, SystemExit(130); resume continues it."""
+  import signal
+  import threading
+  import time
+
+  default = signal.getsignal(signal.SIGTERM)
+
+  def send_when_handled():  # only once train() has installed its handler (else SIGTERM would end pytest)
+    for _ in range(6000):
+      if signal.getsignal(signal.SIGTERM) is not default:
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+      time.sleep(0.01)
+
+  out = str(tmp_path / "killed")
+  kw = dict(seeds=SEEDS, budget=0.0, lagrange_lr=0.01, out_dir=out, **TINY)
+  t = threading.Thread(target=send_when_handled)
+  t.start()
+  with pytest.raises(SystemExit) as e:
+    train.train(env, num_timesteps=1000 * ITER, **kw)
+  t.join()
+  assert e.value.code == 130
+  assert signal.getsignal(signal.SIGTERM) is default  # handler restored
+  from train import checkpoint as ckpt
+  meta = ckpt.read_meta(os.path.join(out, ckpt.FILENAME))
+  done = meta["iteration"]
+  assert 1 <= done < 1000
+  res = train.train(env, num_timesteps=(done + 1) * ITER, resume=True, **kw)
+  assert res.iterations == done + 1
+
+
+def test_paper_preset_initial_log_std_per_dimension():
+  """Brax's tanh-normal head has no std parameter: our init gives log-std −0.5 (arm) / −1.5 (gripper) in every state."""
+  from brax.training.acme import running_statistics
+
+  from train import networks as N
+  cfg = train.PPOConfig.preset("paper").validate()
+  assert (cfg.policy_hidden_sizes, cfg.activation, cfg.num_updates_per_batch, cfg.num_minibatches,
+          cfg.unroll_length, cfg.target_kl, cfg.entropy_cost, cfg.max_grad_norm) == ((512, 512), "tanh", 10, 8,
+                                                                                     512, 0.01, 0.0, 0.5)
+  net = N.make_networks(6, 4, cfg)
+  params = N.init_policy(net, cfg, 4, jax.random.PRNGKey(0))
+  obs = jax.random.normal(jax.random.PRNGKey(1), (64, 6)) * 3.0
+  logits = net.policy_network.apply(running_statistics.init_state(jnp.zeros((6,))), params, obs)
+  log_std = np.log(np.asarray(net.parametric_action_distribution.create_dist(logits).scale))
+  np.testing.assert_allclose(log_std, np.broadcast_to([-0.5, -0.5, -0.5, -1.5], log_std.shape), atol=1e-5)

@@ -1,30 +1,34 @@
 """Checkpoints: a pytree's leaves in one ``.npz`` file, plus JSON metadata.
 
-A checkpoint holds two trees:
+A checkpoint holds two trees, each with a leading seed axis S on every leaf
+(one file for all seeds of a run):
 
-* ``state`` — the full :class:`train.ppo.TrainState` (network params, optimizer
-  state, observation normaliser, Lagrange multiplier, env states, episode
-  accumulators, RNG, iteration counter), for exact ``--resume``;
+* ``state`` — the full :class:`train.iteration.TrainState` (network params,
+  optimizer state, normaliser, multiplier, env states, episode accumulators,
+  RNG, iteration counter), for exact ``--resume``;
 * ``policy`` — only what inference needs, ``(normaliser, policy params)``, so a
   policy can be loaded without building the env or the optimizer.
 
-Only leaves are stored; the tree structure comes from a *template* built by the
-caller from the same config (``jax.eval_shape`` of the init function, which
-traces but compiles nothing). This needs no new dependency and works for any
-pytree (``mjx.Data``, optax states, brax's ``UInt64``) — no serialisation
-registry to keep in sync. Files are written to a temporary name and renamed, so
-an interrupted write never leaves a truncated checkpoint behind.
+``meta["config"]["seeds"]`` lists the seeds in axis order. Only leaves are
+stored; the tree structure comes from a *template* built by the caller from
+the same config (``jax.eval_shape`` of the init function: traces, compiles
+nothing). Writes go through :func:`mjx_damage.io.atomic_path`, so an
+interrupted write leaves the previous checkpoint; a truncated or corrupt file
+(copied half-way, disk full) raises ``ValueError("checkpoint: <file> ...")``.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import zipfile
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from mjx_damage import io
 
 FILENAME = "checkpoint.npz"
 
@@ -37,20 +41,39 @@ def save(path: str, state: Any, policy: Any, meta: dict) -> None:
       arrays[f"{prefix}{i}"] = np.asarray(leaf)
   # default=repr: task overrides may hold callables (params_fn); record, don't fail.
   arrays["meta"] = np.frombuffer(json.dumps(meta, default=repr).encode(), dtype=np.uint8)
-  tmp = path + ".tmp"
-  with open(tmp, "wb") as f:
-    np.savez(f, **arrays)
-  os.replace(tmp, path)
+  with io.atomic_path(path, suffix=".npz") as tmp:
+    with open(tmp, "wb") as f:
+      np.savez(f, **arrays)
+
+
+def _open(path: str):
+  """``np.load`` of a checkpoint with every way a file can be broken turned into one clear error."""
+  if not os.path.isfile(path):
+    raise ValueError(f"checkpoint: no checkpoint file at {path}")
+  try:
+    z = np.load(path)
+    if not hasattr(z, "files") or "meta" not in z.files:
+      raise ValueError("no 'meta' entry")
+    return z
+  except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+    raise ValueError(f"checkpoint: {path} is truncated or corrupt, not a checkpoint written by train ({e}); "
+                     "delete it to start over") from e
+
+
+def _read(z, path: str, key: str) -> np.ndarray:
+  try:
+    return z[key]
+  except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+    raise ValueError(f"checkpoint: {path} is truncated or corrupt: cannot read entry {key!r} ({e})") from e
 
 
 def read_meta(path: str) -> dict:
-  with np.load(path) as z:
-    return json.loads(z["meta"].tobytes().decode())
-
-
-def _leaves(z, prefix: str) -> list[np.ndarray]:
-  n = sum(1 for k in z.files if k.startswith(prefix) and k[len(prefix):].isdigit())
-  return [z[f"{prefix}{i}"] for i in range(n)]
+  with _open(path) as z:
+    raw = _read(z, path, "meta")
+  try:
+    return json.loads(raw.tobytes().decode())
+  except (UnicodeDecodeError, json.JSONDecodeError) as e:
+    raise ValueError(f"checkpoint: {path} has corrupt metadata ({e})") from e
 
 
 def restore(path: str, template: Any, which: str = "state") -> Any:
@@ -62,11 +85,13 @@ def restore(path: str, template: Any, which: str = "state") -> Any:
   """
   if which not in ("state", "policy"):
     raise ValueError(f"which: 'state' or 'policy', got {which!r}")
+  prefix = "s" if which == "state" else "p"
   t_leaves, treedef = jax.tree.flatten(template)
-  with np.load(path) as z:
-    leaves = _leaves(z, "s" if which == "state" else "p")
-  if len(leaves) != len(t_leaves):
-    raise ValueError(f"checkpoint: {path} holds {len(leaves)} {which} arrays, this config needs {len(t_leaves)}")
+  with _open(path) as z:
+    n = sum(1 for k in z.files if k.startswith(prefix) and k[1:].isdigit())
+    if n != len(t_leaves):
+      raise ValueError(f"checkpoint: {path} holds {n} {which} arrays, this config needs {len(t_leaves)}")
+    leaves = [_read(z, path, f"{prefix}{i}") for i in range(n)]
   out = []
   for i, (a, t) in enumerate(zip(leaves, t_leaves)):
     if tuple(a.shape) != tuple(t.shape):

@@ -1,10 +1,16 @@
-"""``mjx-damage train``: PPO / PPO-Lagrangian on a registered task.
+"""``mjx-damage train``: PPO / PPO-Lagrangian / PID-Lagrangian on a registered task, S seeds in one program.
 
 Examples::
 
-    mjx-damage train --task place_plate --damage-weight 2 --num-envs 2048 --timesteps 5e6 --out runs/pp_w2
-    mjx-damage train --task place_plate --budget 5 --out runs/pp_lag          # PPO-Lagrangian, ĉ = 5
-    mjx-damage train --task place_plate --budget 5 --out runs/pp_lag --resume # continue after an interruption
+    mjx-damage train --task place_plate --damage-weight 2 --seeds 0,1,2,3,4 --timesteps 3e7 --out runs/pp_w2
+    mjx-damage train --task place_plate --budget 2 --multiplier pid --out runs/pp_pid   # PID-Lagrangian, ĉ = 2
+    mjx-damage train --task place_plate --preset paper --damage-weight 2 --out runs/pp_paper
+    mjx-damage train --task place_plate --budget 2 --out runs/pp_lag --resume   # continue after an interruption
+
+Every setting left out comes from ``--preset`` (playground: MuJoCo Playground's
+PandaPickCube recipe; paper: the oopsieverse appendix; legacy: this trainer's
+old defaults — train/config.py). Ctrl-C / SIGTERM writes a checkpoint and
+exits with status 130; ``--resume`` continues it exactly.
 """
 
 from __future__ import annotations
@@ -13,20 +19,77 @@ import argparse
 import json
 import sys
 
+from train.config import MULTIPLIERS, PRESETS
+
 
 def _int(text: str) -> int:
   """Integers that may be written as 1e6 / 1_000_000."""
-  v = float(text.replace("_", ""))
+  try:
+    v = float(text.replace("_", ""))
+  except ValueError:
+    raise argparse.ArgumentTypeError(f"not an integer: {text}") from None
   if v != int(v):
     raise argparse.ArgumentTypeError(f"not an integer: {text}")
   return int(v)
 
 
-def _sizes(text: str) -> tuple[int, ...]:
+def _ints(text: str) -> tuple[int, ...]:
   try:
-    return tuple(int(s) for s in text.split(",") if s.strip())
-  except ValueError as e:
-    raise argparse.ArgumentTypeError(f"comma-separated layer sizes, got {text!r}") from e
+    return tuple(_int(s.strip()) for s in text.split(",") if s.strip())
+  except argparse.ArgumentTypeError:
+    raise argparse.ArgumentTypeError(f"comma-separated integers, got {text!r}") from None
+
+
+def _floats(text: str) -> tuple[float, ...]:
+  try:
+    return tuple(float(s) for s in text.split(",") if s.strip())
+  except ValueError:
+    raise argparse.ArgumentTypeError(f"comma-separated numbers, got {text!r}") from None
+
+
+def _bool(text: str) -> bool:
+  if text.lower() in ("1", "true", "yes", "on"):
+    return True
+  if text.lower() in ("0", "false", "no", "off"):
+    return False
+  raise argparse.ArgumentTypeError(f"true/false, got {text!r}")
+
+
+# (flag, PPOConfig field, type, help). Left out → the preset's value.
+CONFIG_FLAGS = (
+    ("--damage-weight", "damage_weight", float, "w in r = (r_task − (w + λ)·cost)/(1 + λ); λ = 0 without --budget"),
+    ("--budget", "budget", float, "episode-cost budget ĉ: enables the multiplier λ"),
+    ("--multiplier", "multiplier", str, f"how λ follows the cost: {' | '.join(MULTIPLIERS)} (with --budget)"),
+    ("--lagrange-lr", "lagrange_lr", float, "plain Lagrangian: λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max)"),
+    ("--lagrange-init", "lagrange_init", float, "initial λ"),
+    ("--lagrange-max", "lagrange_max", float, "λ_max (both multipliers)"),
+    ("--pid-kp", "pid_kp", float, "PID-Lagrangian proportional gain"),
+    ("--pid-ki", "pid_ki", float, "PID-Lagrangian integral gain"),
+    ("--pid-kd", "pid_kd", float, "PID-Lagrangian derivative gain (rising cost only)"),
+    ("--num-envs", "num_envs", _int, "training envs per seed"),
+    ("--timesteps", "num_timesteps", _int, "training env steps per seed"),
+    ("--unroll-length", "unroll_length", _int, None),
+    ("--num-minibatches", "num_minibatches", _int, None),
+    ("--updates-per-batch", "num_updates_per_batch", _int, "SGD epochs per batch"),
+    ("--batch-size", "batch_size", _int, "sequences per minibatch"),
+    ("--policy-hidden", "policy_hidden_sizes", _ints, "e.g. 32,32,32,32"),
+    ("--value-hidden", "value_hidden_sizes", _ints, "e.g. 256,256,256,256,256"),
+    ("--activation", "activation", str, None),
+    ("--init-log-std", "init_log_std", _floats, "ARM,GRIPPER initial log-std (gripper = last action dim); write --init-log-std=-0.5,-1.5"),
+    ("--lr", "learning_rate", float, None),
+    ("--anneal-lr", "anneal_learning_rate", _bool, "true: lr decays linearly to 0 over --timesteps"),
+    ("--clip", "clipping_epsilon", float, None),
+    ("--gamma", "discounting", float, None),
+    ("--gae-lambda", "gae_lambda", float, None),
+    ("--entropy", "entropy_cost", float, None),
+    ("--value-cost", "value_cost", float, "weight of the value loss"),
+    ("--reward-scaling", "reward_scaling", float, None),
+    ("--max-grad-norm", "max_grad_norm", float, "per-network gradient-norm clip"),
+    ("--target-kl", "target_kl", float, "stop an iteration's epochs once KL > 1.5·target"),
+    ("--eval-every", "eval_every", _int, "env steps between evaluations (0: at the end)"),
+    ("--checkpoint-every", "checkpoint_every", _int, "env steps between checkpoints (0: at the end)"),
+    ("--eval-envs", "num_eval_envs", _int, "deterministic evaluation episodes per seed"),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,36 +97,17 @@ def build_parser() -> argparse.ArgumentParser:
                               formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--task", required=True, help="registered task name, or package.module:EnvClass")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
-                 help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode='\"paper\"'")
+                 help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode=paper")
   p.add_argument("--out", dest="out_dir", required=True, help="run directory (config, metrics, checkpoint, curves)")
   p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.npz")
-  p.add_argument("--damage-weight", type=float, default=0.0, help="w in r = (r_task - (w + λ)·cost)/(1 + λ); λ = 0 without --budget")
-  p.add_argument("--budget", type=float, default=None, help="episode-cost budget ĉ: enables PPO-Lagrangian")
-  p.add_argument("--lagrange-lr", type=float, default=0.1, help="λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max) per iteration")
-  p.add_argument("--lagrange-init", type=float, default=0.0)
-  p.add_argument("--lagrange-max", type=float, default=5.0)
-  p.add_argument("--num-envs", type=_int, default=1024)
-  p.add_argument("--timesteps", dest="num_timesteps", type=_int, default=1_000_000)
-  p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds")
-  p.add_argument("--seed", type=_int, default=0)
+  p.add_argument("--preset", default="playground", choices=sorted(PRESETS), help="base settings (train/config.py)")
+  p.add_argument("--seeds", type=_ints, default=None, help="seeds trained together in one program, e.g. 0,1,2,3,4")
+  p.add_argument("--seed", type=_int, default=None, help="one seed (same as --seeds N)")
   p.add_argument("--episode-length", type=_int, default=None, help="default: the task's")
-  p.add_argument("--unroll-length", type=_int, default=20)
-  p.add_argument("--num-minibatches", type=_int, default=8)
-  p.add_argument("--updates-per-batch", dest="num_updates_per_batch", type=_int, default=4)
-  p.add_argument("--batch-size", type=_int, default=None, help="sequences per minibatch (default num_envs/num_minibatches)")
-  p.add_argument("--policy-hidden", dest="policy_hidden_sizes", type=_sizes, default=(256, 256))
-  p.add_argument("--value-hidden", dest="value_hidden_sizes", type=_sizes, default=(256, 256))
-  p.add_argument("--activation", default="swish")
-  p.add_argument("--lr", dest="learning_rate", type=float, default=3e-4)
-  p.add_argument("--clip", dest="clipping_epsilon", type=float, default=0.2)
-  p.add_argument("--gamma", dest="discounting", type=float, default=0.97)
-  p.add_argument("--gae-lambda", type=float, default=0.95)
-  p.add_argument("--entropy", dest="entropy_cost", type=float, default=1e-3)
-  p.add_argument("--reward-scaling", type=float, default=1.0)
-  p.add_argument("--eval-every", type=_int, default=0, help="env steps between evaluations (0: at the end)")
-  p.add_argument("--checkpoint-every", type=_int, default=0, help="env steps between checkpoints (0: at the end)")
-  p.add_argument("--eval-envs", dest="num_eval_envs", type=_int, default=128)
+  p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds")
   p.add_argument("--no-progress", dest="progress", action="store_false")
+  for flag, dest, typ, help_ in CONFIG_FLAGS:
+    p.add_argument(flag, dest=dest, type=typ, default=None, help=help_)
   return p
 
 
@@ -80,21 +124,29 @@ def _task_kwargs(items) -> dict:
   return out
 
 
+def split_args(args: dict) -> tuple[dict, dict]:
+  """argparse namespace → (train() keywords, PPOConfig overrides given on the command line)."""
+  fields = {dest for _, dest, _, _ in CONFIG_FLAGS}
+  config = {k: v for k, v in args.items() if k in fields and v is not None}
+  rest = {k: v for k, v in args.items() if k not in fields}
+  return rest, config
+
+
 def main(argv=None) -> int:
-  args = vars(build_parser().parse_args(argv))
+  args, config = split_args(vars(build_parser().parse_args(argv)))
   from train.ppo import train  # imports jax: keep --help fast
 
   task = args.pop("task")
   try:
     args["task_kwargs"] = _task_kwargs(args.pop("task_arg")) or None
-    args["time_limit"] = args.pop("time_limit")
-    result = train(task, **args)
+    result = train(task, **args, **config)
   except ValueError as e:
     print(f"mjx-damage train: error: {e}", file=sys.stderr)
     return 2
   summary = {
-      "out_dir": result.out_dir, "env_steps": result.env_steps, "wall_time_s": round(result.wall_time, 1),
-      "train_throughput_steps_per_s": round(result.throughput, 1), "final_eval": result.final_eval,
+      "out_dir": result.out_dir, "seeds": list(result.config.seeds), "env_steps_per_seed": result.env_steps,
+      "wall_time_s": round(result.wall_time, 1), "train_throughput_steps_per_s": round(result.throughput, 1),
+      "final_eval": {str(s): ev for s, ev in zip(result.config.seeds, result.final_evals)},
   }
   print(json.dumps(summary, indent=1))
   return 0

@@ -12,7 +12,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from train import evaluate as E
-from train.ppo import resolve_task, safe_threshold_of, task_episode_length
+from train.envs import resolve_task, safe_threshold_of, task_episode_length
 
 Policy = E.Policy
 

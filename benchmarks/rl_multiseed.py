@@ -1,0 +1,309 @@
+"""Safe RL from scratch, S seeds per method in one program: task-only vs penalty vs PPO-Lagrangian vs PID-Lagrangian.
+
+For each method, ``train.train(task, seeds=S, time_limit=--budget-seconds)`` trains all
+seeds in one compiled program (vmap over the seed axis), with periodic deterministic
+evaluations (``--eval-envs`` episodes per seed) for the curves and the time to 80 %
+safe; then every seed's final deterministic policy is scored by ``train.evaluate`` on
+``--eval-episodes`` episodes (seed 12345, as shared/evidence/rl-cross-trainer.md).
+Each row: mean ± std and min over seeds of completion, safe completion, avg env
+health, episode cost; time to ≥ 80 % safe (with ≥ 80 % completion); env-steps/s of
+the whole S-seed program; and the exact command that produced it.
+
+Methods (``--methods``): ``task_only`` (w = 0), ``penalty`` (w = ``--damage-weight``),
+``lagrangian`` (PPO-Lagrangian, ĉ = ``--budget``), ``pid`` (PID-Lagrangian, ĉ =
+``--budget``) — all with ``--preset`` (playground: MuJoCo Playground's PandaPickCube
+recipe) — and ``paper`` / ``paper_task_only`` (the paper's PPO settings, w = 2 / 0).
+
+GPU (one H100; one device call per method, each ≤ 10 min: 300 s training incl.
+compile + final evaluation), results in $OUT, then one table::
+
+    for m in task_only penalty lagrangian pid paper; do
+      python benchmarks/rl_multiseed.py --methods $m --seeds 0,1,2,3,4 --budget-seconds 300 --tag $m --results-dir $OUT
+    done
+    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid,paper}.json --tag h100
+
+Other tasks where the unsafe shortcut is tempting (issue 12 item 5), 3 seeds, one call per method::
+
+    python benchmarks/rl_multiseed.py --task pick_egg --methods task_only --seeds 0,1,2 --tag task_only --results-dir $OUT
+
+CPU plumbing check (learns nothing)::
+
+    python benchmarks/rl_multiseed.py --num-envs 16 --budget-seconds 60 --seeds 0,1 --eval-episodes 16
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import shlex
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cache"))
+
+from mjx_damage import io  # noqa: E402
+
+METHODS = ("task_only", "penalty", "lagrangian", "pid", "paper", "paper_task_only")
+EVAL_SEED = 12345
+METRICS = ("completion", "safe_completion", "avg_env_health", "episode_cost")
+
+
+def method_spec(name: str, args) -> dict:
+  """Label and train() keywords of one method."""
+  w = args.damage_weight
+  return {
+      "task_only": dict(label="task reward only (w=0)", preset=args.preset, damage_weight=0.0),
+      "penalty": dict(label=f"damage penalty (w={w:g})", preset=args.preset, damage_weight=w),
+      "lagrangian": dict(label=f"PPO-Lagrangian (ĉ={args.budget:g})", preset=args.preset, budget=args.budget,
+                         multiplier="lagrangian"),
+      "pid": dict(label=f"PID-Lagrangian (ĉ={args.budget:g})", preset=args.preset, budget=args.budget,
+                  multiplier="pid"),
+      "paper": dict(label=f"paper PPO preset, penalty (w={w:g})", preset="paper", damage_weight=w),
+      "paper_task_only": dict(label="paper PPO preset, task reward only", preset="paper", damage_weight=0.0),
+  }[name]
+
+
+def _ints(text):
+  return tuple(int(s) for s in text.split(",") if s.strip())
+
+
+def parse(argv):
+  p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument("--task", default="place_plate", help="registered task, or package.module:EnvClass")
+  p.add_argument("--obs-mode", default=None,
+                 help="task obs_mode (default: paper for place_plate — the paper's 6-d observation and in-hand "
+                      "start — else the task's own)")
+  p.add_argument("--methods", default="task_only,penalty,lagrangian,pid", help=f"comma-separated of {','.join(METHODS)}")
+  p.add_argument("--seeds", type=_ints, default=(0, 1, 2, 3, 4))
+  p.add_argument("--preset", default="playground", help="preset of the non-paper methods (train/config.py)")
+  p.add_argument("--budget-seconds", type=float, default=300.0, help="training wall clock per method, compile incl.")
+  p.add_argument("--timesteps", type=float, default=1e9, help="env steps per seed (upper bound; the budget stops first)")
+  p.add_argument("--paper-timesteps", type=float, default=1e7,
+                 help="env steps per seed of the paper methods: their lr anneals linearly to 0 over this many")
+  p.add_argument("--num-envs", type=int, default=None, help="envs per seed (default: the preset's)")
+  p.add_argument("--unroll-length", type=int, default=None, help="default: the preset's")
+  p.add_argument("--damage-weight", type=float, default=2.0)
+  p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
+  p.add_argument("--eval-every", type=float, default=3e6,
+                 help="env steps per seed between periodic evaluations (each: S calls of --eval-envs episodes)")
+  p.add_argument("--eval-envs", type=int, default=256, help="episodes per seed of each periodic evaluation")
+  p.add_argument("--eval-episodes", type=int, default=1024, help="episodes per seed of the final evaluation")
+  p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  p.add_argument("--work-dir", default=None, help="run directories (default /tmp/rl_multiseed)")
+  p.add_argument("--tag", default="", help="file-name suffix: rl_<task>_<device>_<tag>.{json,md}")
+  p.add_argument("--combine", nargs="+", metavar="FILE.json", help="no training: merge earlier results into one table")
+  args = p.parse_args(argv)
+  if args.tag and not all(c.isalnum() or c in "_-" for c in args.tag):
+    p.error(f"--tag: letters, digits, '_' and '-' only, got {args.tag!r}")
+  if args.combine:
+    if not args.tag:
+      p.error("--combine: give --tag for the combined table's file name")
+    for path in args.combine:
+      if not os.path.isfile(path):
+        p.error(f"--combine: no such file {path!r}")
+    return args
+  args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+  bad = [m for m in args.methods if m not in METHODS]
+  if bad or not args.methods:
+    p.error(f"--methods: unknown {bad}; choose from {','.join(METHODS)}")
+  if not args.seeds or len(set(args.seeds)) != len(args.seeds):
+    p.error(f"--seeds: distinct integers, got {args.seeds}")
+  if args.budget_seconds <= 0:
+    p.error("--budget-seconds: must be > 0")
+  return args
+
+
+def device_info():
+  import jax
+
+  d = jax.devices()[0]
+  kind = getattr(d, "device_kind", d.platform)
+  slug = "cpu" if d.platform == "cpu" else "".join(c if c.isalnum() else "_" for c in kind.lower()).strip("_")
+  name = f"{kind} ({d.platform}, {jax.device_count()} device(s))"
+  if d.platform == "cpu":
+    name = f"{platform.processor() or platform.machine()} CPU, {os.cpu_count()} cores ({kind})"
+  return slug, name
+
+
+def size_overrides(preset: str, args) -> dict:
+  """--num-envs / --unroll-length on a preset, keeping its rollouts per iteration and minibatch count."""
+  from train.config import PPOConfig
+
+  base = PPOConfig.preset(preset)
+  out = {}
+  if args.unroll_length:
+    out["unroll_length"] = args.unroll_length
+  if args.num_envs:
+    n_mb = min(base.num_minibatches, args.num_envs)
+    out.update(num_envs=args.num_envs, num_minibatches=n_mb,
+               batch_size=max(1, args.num_envs * base.num_rollouts // n_mb))
+  return out
+
+
+def time_to_safe(rows, safe=0.8, completion=0.8):
+  """Wall clock (s from the start of training) of the first evaluation with safe ≥ 0.8 and completion ≥ 0.8."""
+  for r in rows:
+    if (r.get("eval/safe_completion") or 0) >= safe and (r.get("eval/completion") or 0) >= completion:
+      return r["wall_time"]
+  return None
+
+
+def stats(values):
+  import numpy as np
+
+  v = np.asarray([x for x in values if x is not None], np.float64)
+  if v.size == 0:
+    return {"mean": None, "std": None, "min": None, "max": None, "n": 0}
+  return {"mean": float(v.mean()), "std": float(v.std()), "min": float(v.min()), "max": float(v.max()),
+          "n": int(v.size)}
+
+
+def run_method(name: str, args, command: str, work: str) -> dict:
+  import train
+  from train import evaluate as E
+
+  spec = method_spec(name, args)
+  kw = {k: v for k, v in spec.items() if k != "label"}
+  kw.update(size_overrides(spec["preset"], args))
+  obs_mode = args.obs_mode or ("paper" if args.task == "place_plate" else None)
+  task_kwargs = {"obs_mode": obs_mode} if ":" not in args.task and obs_mode else None
+  run_dir = os.path.join(work, name)
+  print(f"== {name}: {spec['label']}, seeds {list(args.seeds)}, {args.budget_seconds:.0f} s", flush=True)
+  steps = min(args.timesteps, args.paper_timesteps) if spec["preset"] == "paper" else args.timesteps
+  res = train.train(args.task, task_kwargs=task_kwargs, seeds=args.seeds, num_timesteps=int(steps),
+                    eval_every=int(args.eval_every), num_eval_envs=args.eval_envs, checkpoint_every=0,
+                    out_dir=run_dir, time_limit=args.budget_seconds, progress=True, **kw)
+  env, _ = train.resolve_task(args.task, task_kwargs)
+  t0 = time.perf_counter()
+  evaluator, finals = None, []
+  for s in args.seeds:  # one executable for all seeds: the weights are data
+    policy = train.load_policy(run_dir, seed=s)
+    if evaluator is None:
+      evaluator = E.Evaluator(env, E.parametrized_policy(policy.apply, None), res.config.episode_length)
+    per_ep = evaluator.run(E.episode_keys(EVAL_SEED, args.eval_episodes), 1.0, params=policy.params)
+    finals.append(E.scalar_metrics(E.metrics(per_ep, env.entity_names, train.ppo.safe_threshold_of(env))))
+  eval_s = time.perf_counter() - t0
+  per_seed = []
+  for s, ev in zip(args.seeds, finals):
+    rows = [r for r in res.history if r["seed"] == s]
+    per_seed.append({"seed": s, "final_eval": ev, "time_to_80_safe_s": time_to_safe(rows),
+                     "final_lambda": rows[-1].get("lagrange") if rows else None})
+  summary = {k: stats([p["final_eval"][k] for p in per_seed]) for k in METRICS}
+  summary["time_to_80_safe_s"] = stats([p["time_to_80_safe_s"] for p in per_seed])
+  curves = f"rl_{name}_curves.png"
+  return {
+      "label": spec["label"], "method": name, "command": command, "train_kwargs": kw, "task_kwargs": task_kwargs,
+      "config": res.config.to_json(), "seeds": list(args.seeds), "per_seed": per_seed, "summary": summary,
+      "env_steps_per_seed": res.env_steps, "wall_time_s": res.wall_time, "train_time_s": res.train_time,
+      "throughput_all_seeds": res.throughput if math.isfinite(res.throughput) else None,  # None: 1 iteration, none timed
+      "final_eval_s": eval_s, "timings": res.timings,
+      "stopped_by_time_limit": res.stopped_early, "curves_src": os.path.join(run_dir, "curves.png"),
+      "curves": curves, "history": res.history,
+  }
+
+
+def _pm(s, pct=True):
+  if s["mean"] is None:
+    return "—"
+  f = (lambda x: f"{100 * x:.1f}") if pct else (lambda x: f"{x:.2f}")
+  return f"{f(s['mean'])} ± {f(s['std'])} (min {f(s['min'])})"
+
+
+def _rate(x):
+  return "—" if x is None else f"{x:,.0f}"
+
+
+def write_results(base: str, payload: dict) -> None:
+  io.write_json(base + ".json", payload, indent=1)
+  lines = [f"# {payload['task']}: multi-seed safe RL ({payload['device']})", "",
+           f"Date: {payload['date']}. Evaluation: every seed's final deterministic policy on "
+           f"{payload['eval_episodes']} episodes (train.evaluate, key seed {EVAL_SEED}). Cells: mean ± std "
+           "(min) over seeds, in % for rates. Safe completion = completed and every tracked entity's final "
+           "health > 95. Time to 80 %: first periodic evaluation with ≥ 80 % safe and ≥ 80 % completion, "
+           "s from the start of training (compile incl.); 'n/S' seeds got there.", "",
+           "| method | seeds | completion % | safe completion % | avg env health | episode cost "
+           "| time to 80 % safe (s) | env-steps/s (all seeds) | env-steps per seed |",
+           "|---|---|---|---|---|---|---|---|---|"]
+  for r in payload["rows"]:
+    s, t = r["summary"], r["summary"]["time_to_80_safe_s"]
+    t80 = "—" if t["mean"] is None else f"{t['mean']:.0f} ± {t['std']:.0f} ({t['n']}/{len(r['seeds'])})"
+    lines.append(f"| {r['label']} | {','.join(map(str, r['seeds']))} | {_pm(s['completion'])} "
+                 f"| {_pm(s['safe_completion'])} | {_pm(s['avg_env_health'], False)} "
+                 f"| {_pm(s['episode_cost'], False)} | {t80} | {_rate(r['throughput_all_seeds'])} "
+                 f"| {r['env_steps_per_seed']:,} |")
+  lines += ["", "## Per seed", "", "| method | seed | completion | safe completion | avg env health | episode cost "
+            "| time to 80 % safe (s) | final λ |", "|---|---|---|---|---|---|---|---|"]
+  for r in payload["rows"]:
+    for p in r["per_seed"]:
+      e, t = p["final_eval"], p["time_to_80_safe_s"]
+      lam = "—" if p["final_lambda"] is None or "Lagrangian" not in r["label"] else f"{p['final_lambda']:.3g}"
+      lines.append(f"| {r['label']} | {p['seed']} | {e['completion']:.1%} | {e['safe_completion']:.1%} "
+                   f"| {e['avg_env_health']:.2f} | {e['episode_cost']:.2f} | {'—' if t is None else f'{t:.0f}'} "
+                   f"| {lam} |")
+  lines += ["", "## Commands", ""] + [f"- {r['label']}: `{r['command']}` ({r['date']}, curves `{r['curves']}`)"
+                                        for r in payload["rows"]]
+  lines += ["", "## Settings per method", ""]
+  for r in payload["rows"]:
+    lines += [f"- {r['label']}: `{json.dumps(r['config'])}`"]
+  lines.append("")
+  io.write_text(base + ".md", "\n".join(lines))
+
+
+def combine(args) -> int:
+  payload = None
+  for path in args.combine:
+    with open(path) as f:
+      src = json.load(f)
+    if payload is None:
+      payload = {k: v for k, v in src.items() if k != "rows"}
+      payload["rows"], payload["sources"] = [], []
+    elif (src["device"], src["task"], src["eval_episodes"]) != (payload["device"], payload["task"],
+                                                                 payload["eval_episodes"]):
+      raise SystemExit(f"--combine: {path} is from another device/task/evaluation size than the first file")
+    payload["rows"] += src["rows"]
+    payload["sources"].append(os.path.basename(path))
+  payload["date"] = time.strftime("%Y-%m-%d %H:%M")
+  slug = payload["task"].rsplit(":", 1)[-1].lower()
+  base = os.path.join(args.results_dir, f"rl_{slug}_combined_{args.tag}")
+  write_results(base, payload)
+  print(f"wrote {base}.md / .json", flush=True)
+  return 0
+
+
+def main(argv=None) -> int:
+  args = parse(argv)
+  if args.combine:
+    return combine(args)
+  import jax
+
+  slug, device = device_info()
+  task_slug = args.task.rsplit(":", 1)[-1].lower()
+  base = os.path.join(args.results_dir, f"rl_{task_slug}_{slug}" + (f"_{args.tag}" if args.tag else ""))
+  work = args.work_dir or os.path.join("/tmp", "rl_multiseed", f"{task_slug}_{slug}")
+  command = " ".join(shlex.quote(a) for a in ["benchmarks/rl_multiseed.py"]
+                     + list(sys.argv[1:] if argv is None else argv))
+  payload = {"device": device, "jax": jax.__version__, "task": args.task, "eval_episodes": args.eval_episodes,
+             "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
+  for name in args.methods:
+    row = run_method(name, args, command, work)
+    row["date"] = time.strftime("%Y-%m-%d %H:%M")
+    src = row.pop("curves_src")
+    row["curves"] = os.path.basename(base) + f"_{name}.png"
+    if os.path.exists(src):
+      with open(src, "rb") as f:
+        io.write_bytes(os.path.join(os.path.dirname(base), row["curves"]), f.read())
+    payload["rows"].append(row)
+    write_results(base, payload)  # after every method: a timeout keeps the finished ones
+    print(json.dumps({k: row[k] for k in ("label", "summary", "throughput_all_seeds", "env_steps_per_seed")},
+                     indent=1), flush=True)
+  print(f"wrote {base}.md / .json", flush=True)
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

@@ -1,0 +1,67 @@
+"""benchmarks/rl_multiseed.py at toy size on CPU: S seeds per method in one program, per-seed final
+evaluation, mean ± std / min rows with their commands, and --combine of two calls into one table."""
+
+import json
+import os
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+
+import rl_multiseed  # noqa: E402
+
+# Minutes on 2 shared cores (compiles of the preset networks per method): run with -m slow.
+pytestmark = pytest.mark.slow
+
+TOY = ["--task", "train.experiments.pusher:PusherEnv", "--seeds", "0,1", "--num-envs", "16", "--unroll-length", "8",
+       "--budget-seconds", "600", "--timesteps", "2048", "--eval-every", "1024", "--eval-envs", "8",
+       "--eval-episodes", "8"]
+
+
+@pytest.fixture(scope="module")
+def two_calls(tmp_path_factory):
+  d = str(tmp_path_factory.mktemp("rl_ms"))
+  # the paper preset's 128 env-steps per iteration (16 envs, rollout 8) → 2 iterations, as the others get
+  for methods, tag, steps in (("task_only,pid", "a", "2048"), ("paper", "b", "256")):
+    assert rl_multiseed.main(TOY + ["--methods", methods, "--tag", tag, "--timesteps", steps, "--results-dir", d,
+                                    "--work-dir", d]) == 0
+  return d
+
+
+def _load(path):
+  with open(path) as f:
+    return json.load(f)
+
+
+def test_rows_have_per_seed_stats_and_commands(two_calls):
+  a = _load(os.path.join(two_calls, "rl_pusherenv_cpu_a.json"))
+  assert [r["method"] for r in a["rows"]] == ["task_only", "pid"]
+  for r in a["rows"]:
+    assert [p["seed"] for p in r["per_seed"]] == [0, 1]
+    assert all(p["final_eval"]["episodes"] == 8 for p in r["per_seed"])
+    s = r["summary"]["safe_completion"]
+    vals = [p["final_eval"]["safe_completion"] for p in r["per_seed"]]
+    assert s["n"] == 2 and s["min"] == min(vals) and abs(s["mean"] - sum(vals) / 2) < 1e-12
+    assert "--methods task_only,pid" in r["command"] and r["throughput_all_seeds"] > 0  # 2 iterations: 1 timed
+    assert {h["seed"] for h in r["history"]} == {0, 1}
+  assert a["rows"][1]["config"]["multiplier"] == "pid" and a["rows"][1]["config"]["budget"] == 2.0
+  assert os.path.isfile(os.path.join(two_calls, "rl_pusherenv_cpu_a_pid.png"))
+
+
+def test_paper_preset_row(two_calls):
+  b = _load(os.path.join(two_calls, "rl_pusherenv_cpu_b.json"))
+  cfg = b["rows"][0]["config"]
+  assert cfg["activation"] == "tanh" and cfg["policy_hidden_sizes"] == [512, 512] and cfg["target_kl"] == 0.01
+  assert cfg["init_log_std"] == [-0.5, -1.5] and cfg["anneal_learning_rate"] and cfg["damage_weight"] == 2.0
+
+
+def test_combine_keeps_each_rows_command(two_calls):
+  files = [os.path.join(two_calls, f"rl_pusherenv_cpu_{t}.json") for t in "ab"]
+  assert rl_multiseed.main(["--combine", *files, "--tag", "toy", "--results-dir", two_calls]) == 0
+  c = _load(os.path.join(two_calls, "rl_pusherenv_combined_toy.json"))
+  assert [r["method"] for r in c["rows"]] == ["task_only", "pid", "paper"]
+  assert "--tag b" in c["rows"][2]["command"] and "--tag a" in c["rows"][0]["command"]
+  md = open(os.path.join(two_calls, "rl_pusherenv_combined_toy.md")).read()
+  assert "PID-Lagrangian" in md and "paper PPO preset" in md and "± " in md

@@ -1,0 +1,245 @@
+"""PPO run configuration: one frozen dataclass, named presets, validation before anything compiles.
+
+Presets (``PPOConfig.preset(name, **overrides)``, ``mjx-damage train --preset NAME``):
+
+* ``playground`` (the default) — MuJoCo Playground 0.2.0's published Brax PPO
+  settings for PandaPickCube (``mujoco_playground/config/manipulation_params.py``):
+  2048 envs, 32 minibatches of 512 sequences, 8 epochs per batch, unroll 10,
+  γ 0.97, lr 1e-3, entropy 2e-2, observation normalisation, policy MLP 32×4,
+  value MLP 256×5 (swish). Brax's own trainer with these settings reaches
+  99 % safe on place_plate (shared/evidence/rl-cross-trainer.md).
+* ``paper`` — the oopsieverse paper's PPO appendix table: actor and critic MLP
+  512×2 tanh, Gaussian + tanh squashing, initial log-std −0.5 (arm) / −1.5
+  (gripper = last action dimension), lr 1e-3 linearly annealed to 0, rollout
+  512 steps, 10 epochs × 8 minibatches, clip 0.2, entropy 0, value coef 0.5,
+  grad-norm 0.5, target KL 0.01 (epochs stop early), γ 0.99, GAE λ 0.95
+  (paper, table "PPO hyperparameters for Place Plate"). The paper trains one
+  env for 1e5 steps (≈ 195 rollouts of 512); here the rollout is batched over
+  256 envs (8 minibatches of 32 sequences × 512 steps).
+* ``legacy`` — this trainer's defaults before the multi-seed rewrite (1024
+  envs, 8 minibatches, 4 epochs, entropy 1e-3, lr 3e-4, 256×2 swish); kept so
+  the committed single-seed rows can be rerun (benchmarks/place_plate_rl.py).
+  Its GPU variant (16384 envs, 8 × 2048 sequences, 4 epochs) did 8× fewer SGD
+  steps per env step than ``playground`` and sat at 0 % completion for 30–60 M
+  env-steps on place_plate (benchmarks/rl_collapse_evidence.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Optional
+
+import numpy as np
+
+ACTIVATION_NAMES = ("tanh", "swish", "relu", "elu")
+MULTIPLIERS = ("lagrangian", "pid")
+
+# Config fields that may change when a run is resumed: they decide how long to
+# run and what to log, never what a training iteration computes.
+RESUMABLE_CHANGES = ("num_timesteps", "eval_every", "checkpoint_every", "num_eval_envs")
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+  """Everything that defines a run. ``validate()`` raises ``ValueError("name: ...")``.
+
+  Batch layout (as in brax): each iteration collects ``num_rollouts =
+  batch_size·num_minibatches / num_envs`` unrolls of ``unroll_length`` steps
+  from all ``num_envs`` envs, i.e. ``batch_size·num_minibatches`` sequences of
+  length ``unroll_length``; each of ``num_updates_per_batch`` epochs shuffles
+  them into ``num_minibatches`` minibatches of ``batch_size`` sequences.
+
+  Reward for the policy: ``(r_task − (w + λ)·cost) / (1 + λ)`` (train.iteration);
+  λ ≡ 0 without ``budget``; with a budget λ follows ``multiplier``
+  (train.multipliers: plain Lagrangian, lr ``lagrange_lr``; or PID with gains
+  ``pid_kp``/``pid_ki``/``pid_kd``).
+  """
+
+  num_envs: int = 2048
+  num_timesteps: int = 1_000_000
+  episode_length: int = 200
+  unroll_length: int = 10
+  num_minibatches: int = 32
+  num_updates_per_batch: int = 8
+  batch_size: Optional[int] = 512  # sequences per minibatch; None → num_envs // num_minibatches
+  learning_rate: float = 1e-3
+  anneal_learning_rate: bool = False  # linear decay to 0 over num_timesteps
+  clipping_epsilon: float = 0.2
+  discounting: float = 0.97
+  gae_lambda: float = 0.95
+  entropy_cost: float = 2e-2
+  value_cost: float = 0.5  # brax's PPO loss weights the value term by 0.5 (the paper's coefficient)
+  reward_scaling: float = 1.0
+  max_grad_norm: Optional[float] = 1.0
+  target_kl: Optional[float] = None  # stop the epochs of an iteration once KL > 1.5·target (SB3's rule)
+  policy_hidden_sizes: tuple[int, ...] = (32, 32, 32, 32)
+  value_hidden_sizes: tuple[int, ...] = (256, 256, 256, 256, 256)
+  activation: str = "swish"
+  init_log_std: Optional[tuple[float, float]] = None  # (arm, gripper = last action dim); None: brax's init
+  normalize_observations: bool = True
+  damage_weight: float = 0.0
+  budget: Optional[float] = None
+  multiplier: str = "lagrangian"
+  lagrange_lr: float = 0.1
+  lagrange_init: float = 0.0
+  lagrange_max: float = 5.0
+  # PID gains for episode costs of O(1–100) health points against ĉ ≈ 2: K_P·e answers a violation at
+  # once; K_I = 0.01 needs Σe = λ_max/K_I = 500 to saturate, so a short costly start does not pin λ.
+  pid_kp: float = 0.1
+  pid_ki: float = 0.01
+  pid_kd: float = 0.05
+  num_eval_envs: int = 128
+  eval_every: int = 0  # env steps between evaluations; 0 → only at the end
+  checkpoint_every: int = 0  # env steps between checkpoints; 0 → only at the end
+  seeds: tuple[int, ...] = (0,)
+
+  @classmethod
+  def preset(cls, name: str, **overrides) -> "PPOConfig":
+    """A named preset (see the module docstring) with ``overrides`` applied; not validated yet."""
+    if name not in PRESETS:
+      raise ValueError(f"preset: unknown {name!r} (valid: {', '.join(PRESETS)})")
+    fields = {f.name for f in dataclasses.fields(cls)}
+    bad = sorted(set(overrides) - fields)
+    if bad:
+      raise ValueError(f"{bad[0]}: not a PPOConfig field (valid: {', '.join(sorted(fields))})")
+    return cls(**{**PRESETS[name], **overrides})
+
+  @property
+  def lagrangian(self) -> bool:
+    return self.budget is not None
+
+  @property
+  def num_seeds(self) -> int:
+    return len(self.seeds)
+
+  @property
+  def minibatch_sequences(self) -> int:
+    return self.batch_size if self.batch_size is not None else self.num_envs // self.num_minibatches
+
+  @property
+  def num_rollouts(self) -> int:
+    return self.minibatch_sequences * self.num_minibatches // self.num_envs
+
+  @property
+  def steps_per_iteration(self) -> int:
+    """Env steps of ONE seed per iteration."""
+    return self.num_envs * self.unroll_length * self.num_rollouts
+
+  @property
+  def num_iterations(self) -> int:
+    return max(1, math.ceil(self.num_timesteps / self.steps_per_iteration))
+
+  @property
+  def sgd_steps_per_iteration(self) -> int:
+    return self.num_minibatches * self.num_updates_per_batch
+
+  def interval_iterations(self, env_steps: int) -> int:
+    """Iterations between two events every ``env_steps`` (0 → never, i.e. only at the end)."""
+    if env_steps <= 0:
+      return 0
+    return max(1, round(env_steps / self.steps_per_iteration))
+
+  def validate(self) -> "PPOConfig":
+    def is_int(v):
+      return not isinstance(v, bool) and isinstance(v, (int, np.integer))
+
+    def pos_int(name):
+      v = getattr(self, name)
+      if not is_int(v) or v < 1:
+        raise ValueError(f"{name}: must be a positive integer, got {v!r}")
+
+    def number(name, lo=None, hi=None, lo_open=False, allow_none=False):
+      v = getattr(self, name)
+      if v is None and allow_none:
+        return
+      if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v):
+        raise ValueError(f"{name}: must be a finite number, got {v!r}")
+      if lo is not None and (v <= lo if lo_open else v < lo):
+        raise ValueError(f"{name}: must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+      if hi is not None and v > hi:
+        raise ValueError(f"{name}: must be <= {hi}, got {v!r}")
+
+    for name in ("num_envs", "num_timesteps", "episode_length", "unroll_length", "num_minibatches",
+                 "num_updates_per_batch", "num_eval_envs"):
+      pos_int(name)
+    if self.batch_size is not None:
+      pos_int("batch_size")
+    elif self.num_envs % self.num_minibatches:
+      raise ValueError(f"num_envs: {self.num_envs} must be divisible by num_minibatches "
+                       f"({self.num_minibatches}) when batch_size is not given")
+    if (self.minibatch_sequences * self.num_minibatches) % self.num_envs:
+      raise ValueError(f"num_envs: {self.num_envs} must divide batch_size·num_minibatches = "
+                       f"{self.minibatch_sequences}·{self.num_minibatches}")
+    for name in ("eval_every", "checkpoint_every"):
+      v = getattr(self, name)
+      if not is_int(v) or v < 0:
+        raise ValueError(f"{name}: must be an integer >= 0, got {v!r}")
+    s = self.seeds
+    if (not isinstance(s, (tuple, list)) or not s or any(not is_int(x) or x < 0 for x in s)
+        or len(set(s)) != len(s)):
+      raise ValueError(f"seeds: a non-empty sequence of distinct integers >= 0, got {s!r}")
+    number("learning_rate", lo=0, lo_open=True)
+    number("clipping_epsilon", lo=0, lo_open=True)
+    number("discounting", lo=0, hi=1)
+    number("gae_lambda", lo=0, hi=1)
+    number("entropy_cost", lo=0)
+    number("value_cost", lo=0)
+    number("reward_scaling", lo=0, lo_open=True)
+    number("max_grad_norm", lo=0, lo_open=True, allow_none=True)
+    number("target_kl", lo=0, lo_open=True, allow_none=True)
+    number("damage_weight", lo=0)
+    number("budget", lo=0, allow_none=True)
+    for name in ("lagrange_lr", "lagrange_init", "lagrange_max", "pid_kp", "pid_ki", "pid_kd"):
+      number(name, lo=0)
+    if self.multiplier not in MULTIPLIERS:
+      raise ValueError(f"multiplier: one of {', '.join(MULTIPLIERS)}, got {self.multiplier!r}")
+    for name in ("policy_hidden_sizes", "value_hidden_sizes"):
+      v = getattr(self, name)
+      if not isinstance(v, (tuple, list)) or not v or any(not is_int(h) or h < 1 for h in v):
+        raise ValueError(f"{name}: must be a non-empty sequence of positive integers, got {v!r}")
+    if self.activation not in ACTIVATION_NAMES:
+      raise ValueError(f"activation: one of {', '.join(ACTIVATION_NAMES)}, got {self.activation!r}")
+    v = self.init_log_std
+    if v is not None and (not isinstance(v, (tuple, list)) or len(v) != 2 or any(
+        isinstance(x, bool) or not isinstance(x, (int, float)) or not -10 <= x <= 2 for x in v)):
+      raise ValueError(f"init_log_std: (arm, gripper) log-stds in [-10, 2], or None; got {v!r}")
+    return self
+
+  def to_json(self) -> dict:
+    d = dataclasses.asdict(self)
+    for k in ("policy_hidden_sizes", "value_hidden_sizes", "seeds", "init_log_std"):
+      d[k] = None if d[k] is None else list(d[k])
+    return d
+
+  @classmethod
+  def from_json(cls, d: dict) -> "PPOConfig":
+    d = dict(d)
+    if "seeds" not in d and "seed" in d:  # checkpoints written before the seed axis
+      d["seeds"] = [d.pop("seed")]
+    for k in ("policy_hidden_sizes", "value_hidden_sizes", "seeds", "init_log_std"):
+      if d.get(k) is not None:
+        d[k] = tuple(d[k])
+    names = {f.name for f in dataclasses.fields(cls)}
+    # Older checkpoints lack the newer fields: they ran with what these were then.
+    old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
+           "value_cost": 0.5}
+    return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
+
+
+_PLAYGROUND = dict(
+    num_envs=2048, unroll_length=10, num_minibatches=32, batch_size=512, num_updates_per_batch=8,
+    learning_rate=1e-3, entropy_cost=2e-2, discounting=0.97, gae_lambda=0.95, clipping_epsilon=0.3,
+    reward_scaling=1.0, max_grad_norm=1.0, policy_hidden_sizes=(32, 32, 32, 32),
+    value_hidden_sizes=(256, 256, 256, 256, 256), activation="swish", normalize_observations=True)
+_PAPER = dict(
+    num_envs=256, unroll_length=512, num_minibatches=8, batch_size=None, num_updates_per_batch=10,
+    learning_rate=1e-3, anneal_learning_rate=True, clipping_epsilon=0.2, entropy_cost=0.0, value_cost=0.5,
+    max_grad_norm=0.5, target_kl=0.01, discounting=0.99, gae_lambda=0.95, reward_scaling=1.0,
+    policy_hidden_sizes=(512, 512), value_hidden_sizes=(512, 512), activation="tanh",
+    init_log_std=(-0.5, -1.5), normalize_observations=True)
+_LEGACY = dict(
+    num_envs=1024, unroll_length=20, num_minibatches=8, batch_size=None, num_updates_per_batch=4,
+    learning_rate=3e-4, entropy_cost=1e-3, discounting=0.97, gae_lambda=0.95, clipping_epsilon=0.2,
+    max_grad_norm=1.0, policy_hidden_sizes=(256, 256), value_hidden_sizes=(256, 256), activation="swish")
+PRESETS: dict[str, dict] = {"playground": _PLAYGROUND, "paper": _PAPER, "legacy": _LEGACY}

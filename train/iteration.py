@@ -1,0 +1,252 @@
+"""One PPO(-Lagrangian) iteration as a pure function of one seed's train state (purejaxrl style).
+
+``Trainer.train_iteration(ts) -> (ts, metrics)``: rollout of R·T steps of all
+E envs (``lax.scan``), reward shaping with the multiplier the rollout was
+collected under, multiplier update, observation-normaliser update, then
+``num_updates_per_batch`` epochs of ``num_minibatches`` minibatches (nested
+``lax.scan``); GAE and the clipped loss are brax's ``compute_ppo_loss``.
+Nothing here loops in Python and nothing depends on the seed count: the run
+loop (train.ppo) vmaps this function over a leading seed axis of the whole
+:class:`TrainState` and jits it once, so S seeds are one program and one call
+per iteration.
+
+Policy reward per step::
+
+    r = (r_task − (w + λ)·cost) / (1 + λ)
+
+``r_task = info["task_reward"]``, ``cost = info["cost"]`` (DamageWrapper at weight
+0: w and λ are traced values, not constants baked into the env). With λ ≡ 0
+(penalty / task-only) this is the paper's r_task − w·cost. The 1/(1 + λ) factor
+keeps the return scale bounded while λ grows (episode cost is unbounded) and
+leaves the task/cost trade-off set by λ.
+
+Time limits: brax's EpisodeWrapper marks the last step of an episode with
+``truncation = 1`` and ``done = 1``; the loss treats ``done ∧ ¬truncation`` as
+termination (no bootstrap) and masks the truncated step's TD error, so a time
+limit is never learnt as a terminal state. The tasks used for RL never set
+``done`` themselves (no success or destruction termination), so every episode
+end is a truncation.
+
+Shapes: E = num_envs, T = unroll_length, R = num_rollouts, O = observation
+size, A = action size, N = tracked entities.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import flax
+import jax
+import jax.numpy as jnp
+import numpy as np
+from brax.envs.base import Env, State
+from brax.envs.wrappers import training as brax_training
+from brax.training import types
+from brax.training.acme import running_statistics
+from brax.training.agents.ppo import losses as ppo_losses
+from brax.training.agents.ppo import networks as ppo_networks
+
+from train import evaluate as E
+from train import multipliers as M
+from train import networks as N
+from train.config import PPOConfig
+from train.envs import safe_threshold_of
+
+LOSS_KEYS = ("total_loss", "policy_loss", "v_loss", "entropy_loss", "kl_mean", "policy_dist_mean_std")
+
+
+@flax.struct.dataclass
+class EpisodeAcc:
+  """Running sums of the episode in progress in each training env, f32[E] each."""
+
+  task_return: jax.Array
+  cost: jax.Array
+  completed: jax.Array  # 1.0 once the success condition has held
+
+
+@flax.struct.dataclass
+class TrainState:
+  """One seed's whole training state (the run loop adds a leading seed axis S to every leaf)."""
+
+  params: ppo_losses.PPONetworkParams
+  opt_state: Any
+  normalizer: running_statistics.RunningStatisticsState
+  env_state: State  # batched over E
+  episode: EpisodeAcc
+  multiplier: M.MultiplierState
+  multiplier_params: M.MultiplierParams
+  damage_weight: jax.Array  # f32[], w
+  cost_estimate: jax.Array  # f32[], last measured mean episode cost J_c
+  has_cost_estimate: jax.Array  # f32[], 1.0 once any training episode has ended
+  rng: jax.Array  # u32[2]
+  iteration: jax.Array  # i32[]
+
+  @property
+  def lagrange(self):
+    return self.multiplier.lam
+
+
+def shape_reward(r_task, cost, damage_weight, lam):
+  """Policy reward ``(r_task − (w + λ)·cost) / (1 + λ)``; any matching shapes (module docstring)."""
+  return (r_task - (damage_weight + lam) * cost) / (1.0 + lam)
+
+
+class Trainer:
+  """The static parts of a run (envs, networks, optimizer); every method is a pure function."""
+
+  def __init__(self, env: Env, cfg: PPOConfig):
+    self.cfg = cfg.validate()
+    self.base_env = env
+    self.safe_threshold = safe_threshold_of(env)
+    episodic = brax_training.EpisodeWrapper(env, cfg.episode_length, action_repeat=1)
+    # Training: auto-resetting batch (brax's order: Episode → Vmap → AutoReset).
+    self.env = brax_training.AutoResetWrapper(brax_training.VmapWrapper(episodic))
+    obs_shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape
+    if len(obs_shape) != 1:
+      raise ValueError(f"task: observations must be flat vectors, got shape {obs_shape}")
+    self.obs_size, self.action_size = int(obs_shape[0]), int(env.action_size)
+    if self.action_size < 1:
+      raise ValueError("task: the env has no actions to learn")
+    self.network = N.make_networks(self.obs_size, self.action_size, cfg)
+    self.make_policy = ppo_networks.make_inference_fn(self.network)
+    self.optimizer = N.make_optimizer(cfg)
+    self.gradient_update = N.make_gradient_update(self.network, self.optimizer, cfg)
+
+  # -- init -----------------------------------------------------------------
+  def init_state(self, seed) -> TrainState:
+    """Fresh state of one seed (``seed`` i32[], traced: vmap it over a seed vector)."""
+    cfg = self.cfg
+    key = jax.random.PRNGKey(seed)
+    key, k_net, k_env = jax.random.split(key, 3)
+    params = N.init_params(self.network, cfg, self.action_size, k_net)
+    zeros = jnp.zeros((cfg.num_envs,), jnp.float32)
+    f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    kind = (M.PID if cfg.multiplier == "pid" else M.LAGRANGIAN) if cfg.lagrangian else M.FIXED
+    plain = cfg.multiplier == "lagrangian"
+    return TrainState(
+        params=params,
+        opt_state=self.optimizer.init(params),
+        normalizer=running_statistics.init_state(jnp.zeros((self.obs_size,), jnp.float32)),
+        env_state=self.env.reset(jax.random.split(k_env, cfg.num_envs)),
+        episode=EpisodeAcc(zeros, zeros, zeros),
+        multiplier=M.init(cfg.lagrange_init if cfg.lagrangian else 0.0),
+        multiplier_params=M.MultiplierParams(
+            kind=f32(kind), budget=f32(cfg.budget or 0.0), kp=f32(0.0 if plain else cfg.pid_kp),
+            ki=f32(cfg.lagrange_lr if plain else cfg.pid_ki), kd=f32(0.0 if plain else cfg.pid_kd),
+            lam_max=f32(cfg.lagrange_max)),
+        damage_weight=f32(cfg.damage_weight),
+        cost_estimate=f32(0.0),
+        has_cost_estimate=f32(0.0),
+        rng=key,
+        iteration=jnp.zeros((), jnp.int32),
+    )
+
+  def inference_params(self, ts: TrainState):
+    """What a policy needs: ``(normaliser, policy params)`` (brax's inference-param layout)."""
+    return (ts.normalizer, ts.params.policy)
+
+  # -- acting ---------------------------------------------------------------
+  def _env_step(self, policy, carry, key):
+    """One step of all E envs → new carry, a Transition [E, ...], sums over episodes ending here (f32[])."""
+    state, acc = carry
+    action, policy_extras = policy(state.obs, key)  # f32[E, A]
+    nstate = self.env.step(state, action)
+    r_task, cost, done = nstate.info["task_reward"], nstate.info["cost"], nstate.done  # f32[E]
+    success = nstate.metrics.get("success", jnp.zeros_like(done))
+    ret, c = acc.task_return + r_task, acc.cost + cost
+    completed = jnp.maximum(acc.completed, success)
+    # AutoResetWrapper resets only pipeline_state/obs: info still holds the final step's health.
+    health = nstate.info["entity_health"]  # f32[E, N]
+    safe = completed * (jnp.min(health, axis=-1) > self.safe_threshold)
+    ended = {
+        "episodes": jnp.sum(done), "return": jnp.sum(done * ret), "cost": jnp.sum(done * c),
+        "completion": jnp.sum(done * completed), "safe_completion": jnp.sum(done * safe),
+        "health": jnp.sum(done * jnp.mean(health, axis=-1)),
+    }
+    acc = jax.tree.map(lambda x: jnp.where(done > 0, 0.0, x), EpisodeAcc(ret, c, completed))
+    transition = types.Transition(
+        observation=state.obs, action=action,
+        reward=r_task,  # shaped after the rollout, once λ is known (train_iteration)
+        discount=1.0 - done, next_observation=nstate.obs,
+        extras={"policy_extras": policy_extras,
+                "state_extras": {"truncation": nstate.info["truncation"], "cost": cost}},
+    )
+    return (nstate, acc), (transition, ended)
+
+  def collect(self, ts: TrainState):
+    """Roll out R·T steps of all envs with the stochastic policy → (ts, data [R·E, T, ...], ended sums)."""
+    key, k_unroll = jax.random.split(ts.rng)
+    policy = self.make_policy((ts.normalizer, ts.params.policy))
+    step = functools.partial(self._env_step, policy)
+    keys = jax.random.split(k_unroll, (self.cfg.num_rollouts, self.cfg.unroll_length))
+    (env_state, acc), (data, ended) = jax.lax.scan(
+        lambda carry, k: jax.lax.scan(step, carry, k), (ts.env_state, ts.episode), keys)
+    # [R, T, E, ...] → [R, E, T, ...] → [R·E, T, ...]: sequences first, as the loss expects.
+    data = jax.tree.map(lambda x: jnp.swapaxes(x, 1, 2).reshape((-1,) + x.shape[1:2] + x.shape[3:]), data)
+    return ts.replace(env_state=env_state, episode=acc, rng=key), data, jax.tree.map(jnp.sum, ended)
+
+  # -- learning -------------------------------------------------------------
+  def _minibatch(self, normalizer, carry, inp):
+    """One SGD step; with ``target_kl`` a step whose pre-update KL exceeds 1.5·target stops the rest."""
+    params, opt_state, stopped = carry
+    mb, key = inp
+    (_, metrics), new_params, new_opt = self.gradient_update(params, normalizer, mb, key, optimizer_state=opt_state)
+    metrics = {k: metrics[k] for k in LOSS_KEYS}
+    if self.cfg.target_kl is None:
+      return (new_params, new_opt, stopped), (metrics, jnp.ones(()))
+    stop = stopped | (metrics["kl_mean"] > 1.5 * self.cfg.target_kl)
+    keep = lambda old, new: jax.tree.map(lambda a, b: jnp.where(stop, a, b), old, new)  # noqa: E731
+    return (keep(params, new_params), keep(opt_state, new_opt), stop), (metrics, 1.0 - stop.astype(jnp.float32))
+
+  def _epoch(self, normalizer, data, carry, key):
+    k_perm, k_loss = jax.random.split(key)
+    n_mb = self.cfg.num_minibatches
+    shuffled = jax.tree.map(lambda x: jax.random.permutation(k_perm, x).reshape((n_mb, -1) + x.shape[1:]), data)
+    return jax.lax.scan(functools.partial(self._minibatch, normalizer), carry,
+                        (shuffled, jax.random.split(k_loss, n_mb)))
+
+  def update(self, ts: TrainState, data: types.Transition):
+    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order)."""
+    key, k_sgd = jax.random.split(ts.rng)
+    normalizer = ts.normalizer
+    if self.cfg.normalize_observations:
+      normalizer = running_statistics.update(normalizer, data.observation)
+    (params, opt_state, _), (metrics, taken) = jax.lax.scan(
+        functools.partial(self._epoch, normalizer, data),
+        (ts.params, ts.opt_state, jnp.zeros((), bool)),
+        jax.random.split(k_sgd, self.cfg.num_updates_per_batch))
+    metrics = {k: jnp.sum(v * taken) / jnp.maximum(jnp.sum(taken), 1.0) for k, v in metrics.items()}
+    metrics["sgd_steps"] = jnp.sum(taken)
+    return ts.replace(params=params, opt_state=opt_state, normalizer=normalizer, rng=key), metrics
+
+  def train_iteration(self, ts: TrainState):
+    """``(TrainState) -> (TrainState, metrics: dict of f32[])`` for one seed."""
+    lam = ts.multiplier.lam
+    ts, data, ended = self.collect(ts)
+    cost = data.extras["state_extras"]["cost"]  # f32[R·E, T]
+    data = data._replace(reward=shape_reward(data.reward, cost, ts.damage_weight, lam))
+    n = ended["episodes"]
+    cost_estimate = jnp.where(n > 0, ended["cost"] / jnp.maximum(n, 1.0), ts.cost_estimate)
+    has_estimate = jnp.maximum(ts.has_cost_estimate, (n > 0).astype(jnp.float32))
+    mult = M.update(ts.multiplier, ts.multiplier_params, cost_estimate, has_estimate)
+    ts, loss_metrics = self.update(ts, data)
+    ts = ts.replace(multiplier=mult, cost_estimate=cost_estimate, has_cost_estimate=has_estimate,
+                    iteration=ts.iteration + 1)
+    metrics = {f"ended_{k}": v for k, v in ended.items()}
+    metrics.update({("sgd_steps" if k == "sgd_steps" else f"loss/{k}"): v for k, v in loss_metrics.items()})
+    metrics.update(step_reward=jnp.mean(data.reward), step_cost=jnp.mean(cost), lagrange=mult.lam,
+                   cost_estimate=cost_estimate)
+    return ts, metrics
+
+  # -- evaluation (train.evaluate owns the rollout) --------------------------
+  def make_evaluator(self) -> "E.Evaluator":
+    """The deterministic policy's Evaluator on ``base_env``; weights are passed as data per call."""
+    apply = N.policy_apply(self.make_policy, deterministic=True)
+    return E.Evaluator(self.base_env, E.parametrized_policy(apply, None), self.cfg.episode_length)
+
+  def evaluate(self, evaluator: "E.Evaluator", inference_params, key, num_episodes: int) -> dict:
+    """``num_episodes`` deterministic episodes of one seed's policy → train.evaluate's flat summary."""
+    keys = np.asarray(jax.random.split(key, num_episodes))
+    per_ep = evaluator.run(keys, 1.0, params=inference_params)
+    return E.scalar_metrics(E.metrics(per_ep, self.base_env.entity_names, self.safe_threshold))

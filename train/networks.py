@@ -1,0 +1,124 @@
+"""Actor/critic networks, their initialisation, the PPO loss and the optimizer.
+
+Brax's pieces are used as they are: ``make_ppo_networks`` (MLPs, a tanh-squashed
+Gaussian whose scale is ``softplus(head) + 0.001``), ``compute_ppo_loss`` (clipped
+surrogate, GAE with termination vs time-limit truncation, value loss, entropy),
+``gradients.gradient_update_fn`` and the running observation normaliser.
+
+What is ours: a per-dimension initial log-std (the paper's −0.5 arm / −1.5
+gripper). Brax's tanh-normal policy has no std parameter to initialise — its
+scale comes out of the last layer — so :func:`init_policy` zeroes the weights
+of that layer's scale half and sets its bias to ``softplus⁻¹(exp(log_std) −
+0.001)``: the std starts at exactly ``exp(log_std)`` in every state and may
+become state-dependent as it learns.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import optax
+from brax.training import gradients, types
+from brax.training.acme import running_statistics
+from brax.training.agents.ppo import losses as ppo_losses
+from brax.training.agents.ppo import networks as ppo_networks
+
+from train.config import PPOConfig
+
+ACTIVATIONS: dict[str, Callable] = {
+    "tanh": jnp.tanh,
+    "swish": jax.nn.swish,
+    "relu": jax.nn.relu,
+    "elu": jax.nn.elu,
+}
+MIN_STD = 0.001  # brax NormalTanhDistribution's floor on the scale
+
+
+def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networks.PPONetworks:
+  normalize = running_statistics.normalize if cfg.normalize_observations else types.identity_observation_preprocessor
+  return ppo_networks.make_ppo_networks(
+      obs_size,
+      action_size,
+      preprocess_observations_fn=normalize,
+      policy_hidden_layer_sizes=tuple(cfg.policy_hidden_sizes),
+      value_hidden_layer_sizes=tuple(cfg.value_hidden_sizes),
+      activation=ACTIVATIONS[cfg.activation],
+  )
+
+
+def initial_log_std(cfg: PPOConfig, action_size: int):
+  """f32[A] initial log-std (arm dims, then the gripper as the last dim), or None for brax's init."""
+  if cfg.init_log_std is None:
+    return None
+  arm, grip = cfg.init_log_std
+  return jnp.full((action_size,), arm, jnp.float32).at[-1].set(grip)
+
+
+def init_policy(network: ppo_networks.PPONetworks, cfg: PPOConfig, action_size: int, key):
+  """Policy params from brax's init, with the std head's bias set for ``cfg.init_log_std``."""
+  params = network.policy_network.init(key)
+  log_std = initial_log_std(cfg, action_size)
+  if log_std is None:
+    return params
+  layers = params["params"]
+  last = max(layers, key=lambda name: int(name.rsplit("_", 1)[-1]))  # MLP layers are hidden_0..hidden_n
+  std = jnp.maximum(jnp.exp(log_std) - MIN_STD, 1e-6)
+  bias = layers[last]["bias"].at[action_size:].set(std + jnp.log(-jnp.expm1(-std)))  # softplus⁻¹(std)
+  kernel = layers[last]["kernel"].at[:, action_size:].set(0.0)  # the same std in every state at first
+  return {**params, "params": {**layers, last: {**layers[last], "bias": bias, "kernel": kernel}}}
+
+
+def init_params(network, cfg: PPOConfig, action_size: int, key) -> ppo_losses.PPONetworkParams:
+  k_policy, k_value = jax.random.split(key)
+  return ppo_losses.PPONetworkParams(policy=init_policy(network, cfg, action_size, k_policy),
+                                     value=network.value_network.init(k_value))
+
+
+def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
+  """Adam (optionally with lr annealed linearly to 0), gradient norm clipped per network.
+
+  Why per network: damage costs make rare, very large rewards (one drop can
+  cost hundreds of health points in a step), so the value loss's gradient can
+  be orders of magnitude larger than the policy's; one global-norm clip over
+  both would shrink the policy's step to nothing whenever the critic is
+  surprised.
+  """
+  lr = cfg.learning_rate
+  if cfg.anneal_learning_rate:
+    lr = optax.linear_schedule(cfg.learning_rate, 0.0, cfg.num_iterations * cfg.sgd_steps_per_iteration)
+
+  def one():
+    adam = optax.adam(lr)
+    return adam if cfg.max_grad_norm is None else optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), adam)
+
+  def labels(params: ppo_losses.PPONetworkParams):
+    return ppo_losses.PPONetworkParams(policy=jax.tree.map(lambda _: "policy", params.policy),
+                                       value=jax.tree.map(lambda _: "value", params.value))
+
+  return optax.multi_transform({"policy": one(), "value": one()}, labels)
+
+
+def make_gradient_update(network, optimizer, cfg: PPOConfig):
+  """``update(params, normalizer, minibatch [B, T], key, optimizer_state=...) -> ((loss, metrics), params, opt_state)``."""
+  loss_fn = functools.partial(
+      ppo_losses.compute_ppo_loss,
+      ppo_network=network,
+      entropy_cost=cfg.entropy_cost,
+      discounting=cfg.discounting,
+      reward_scaling=cfg.reward_scaling,
+      gae_lambda=cfg.gae_lambda,
+      clipping_epsilon=cfg.clipping_epsilon,
+      normalize_advantage=True,
+      vf_coefficient=cfg.value_cost,
+  )
+  return gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=None, has_aux=True)
+
+
+def policy_apply(make_policy, deterministic: bool):
+  """``apply(params, state, rng) -> action`` for one env (the form train.evaluate takes)."""
+  def apply(params, state, rng):
+    return make_policy(params, deterministic=deterministic)(state.obs, rng)[0]
+  return apply
