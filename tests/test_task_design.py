@@ -91,6 +91,15 @@ def test_separation_and_shortcut_preference_many_episodes(name):
   check(run_policies(name, DESIGNED[name], episodes=256, seed=1), name)
 
 
+@pytest.mark.slow
+def test_place_plate_counter_start_still_separates():
+  """The scripted policies changed for the in-hand start; the counter start must keep its separation."""
+  res = run_policies("place_plate", {}, episodes=32)
+  s, u = res["safe"], res["unsafe"]
+  assert s["completion"] >= 0.95 and s["safe_completion"] >= 0.90, s
+  assert u["completion"] >= 0.80 and u["safe_completion"] <= 0.10, u
+
+
 def test_place_plate_hand_speed_knob():
   """``hand_speed`` is validated before anything compiles; its default depends on the start."""
   with pytest.raises(ValueError, match="hand_speed"):
