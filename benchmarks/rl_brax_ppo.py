@@ -20,7 +20,9 @@ after that much training wall time (the policy of that evaluation is scored).
 GPU (one H100, ≤ 10 min per call; earlier runs of this recipe needed 15–23 M
 env-steps, ≈ 50 k env-steps/s alone on the GPU, plus ≈ 65 s compile)::
 
-    python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0 --seeds 0 --num-timesteps 20000000 --out-dir $OUT
+    cp benchmarks/results/rl_brax_place_plate_*.json $OUT/ 2>/dev/null   # rows of earlier calls, to merge
+    python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0 --seeds 0 --num-timesteps 20000000 \
+        --num-evals 9 --budget-seconds 420 --out-dir $OUT
 
 CPU plumbing check (learns nothing)::
 
@@ -135,8 +137,8 @@ def render_md(doc: dict) -> str:
   lines = [
       f"# Brax PPO (brax.training.agents.ppo.train) on {doc['task']}: task-only vs damage penalty",
       "",
-      f"Device: {doc['device']}. Recipe: MuJoCo Playground 0.2.0 PandaPickCube PPO settings "
-      f"({', '.join(f'{k} {v}' for k, v in doc['recipe'].items() if k != 'num_timesteps')}; "
+      f"Device: {doc['device']}. Recipe: MuJoCo Playground 0.2.0 PandaPickCube PPO settings, with the "
+      f"command line's overrides (last call: {', '.join(f'{k} {v}' for k, v in doc['recipe'].items())}; "
       f"policy MLP {'×'.join(map(str, POLICY_LAYERS[:1]))}×{len(POLICY_LAYERS)}, value MLP "
       f"{VALUE_LAYERS[0]}×{len(VALUE_LAYERS)}), episode length = the task's. Task settings: "
       f"{doc['task_settings'] or 'defaults'}. Each final deterministic policy scored by "
