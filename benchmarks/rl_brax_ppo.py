@@ -1,0 +1,245 @@
+"""A second trainer on our tasks: Brax's own PPO (``brax.training.agents.ppo.train``), task-only vs damage penalty.
+
+Nothing of ``train/`` trains here: brax 0.14.2's ``ppo.train`` runs on
+``tasks.make(task, damage_weight=w, ...)`` with MuJoCo Playground 0.2.0's
+published PPO settings for its PandaPickCube task
+(``mujoco_playground/config/manipulation_params.py``: 2048 envs, batch 512 × 32
+minibatches, 8 updates per batch, unroll 10, γ 0.97, lr 1e-3, entropy 2e-2,
+observation normalisation, reward scaling 1, policy MLP 32×4, value MLP 256×5,
+10 resets per evaluation, 4 evaluations, action repeat 1), episode length =
+the task's. Each final deterministic policy is scored by
+``train.evaluate.evaluate(env, policy, episodes=1024, seed=12345)`` (DAMAGE_MODEL.md §7:
+completion, safe completion, average env health, episode cost).
+
+Rows go to ``benchmarks/results/rl_brax_<task>_<device>.{json,md}`` (or
+``--out STEM``), one per (damage weight, seed), each with its exact command;
+rows of other (weight, seed) pairs already in the file are kept, so one call per
+run builds one table. ``--budget-seconds`` stops a run at the first evaluation
+after that much training wall time (the policy of that evaluation is scored).
+
+GPU (one H100, ≤ 10 min per call; earlier runs of this recipe needed 15–23 M
+env-steps, ≈ 50 k env-steps/s alone on the GPU, plus ≈ 65 s compile)::
+
+    cp benchmarks/results/rl_brax_place_plate_*.json $OUT/ 2>/dev/null   # rows of earlier calls, to merge
+    python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0 --seeds 0 --num-timesteps 20000000 \
+        --num-evals 9 --budget-seconds 420 --out-dir $OUT
+
+CPU plumbing check (learns nothing)::
+
+    PYTHONPATH=. .venv/bin/python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0,2 --seeds 0 \
+        --num-envs 8 --batch-size 8 --num-minibatches 2 --unroll-length 4 --num-timesteps 2000 \
+        --num-eval-envs 8 --num-resets-per-eval 1 --eval-episodes 16 --out-dir /tmp/rl_brax
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import platform
+import re
+import shlex
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import mjx_damage  # noqa: E402,F401  (jax compat shim for brax, XLA:CPU flags, compile cache)
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+from brax.training.agents.ppo import networks as ppo_networks  # noqa: E402
+from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
+
+import tasks  # noqa: E402
+from mjx_damage.io import write_json, write_text  # noqa: E402
+from train.evaluate import evaluate, parametrized_policy  # noqa: E402
+
+RESULTS = os.path.join(ROOT, "benchmarks", "results")
+# The setting each task is trained in (issue 24; Place Plate: the paper's 6-D observation, plate in hand).
+RL_SETTINGS = {"place_plate": {"obs_mode": "paper"}}
+# MuJoCo Playground 0.2.0, manipulation_params.brax_ppo_config("PandaPickCube") (base config + its branch).
+PLAYGROUND_PANDA_PICK_CUBE = {
+    "num_envs": 2048, "batch_size": 512, "num_minibatches": 32, "num_updates_per_batch": 8, "unroll_length": 10,
+    "discounting": 0.97, "learning_rate": 1e-3, "entropy_cost": 2e-2, "normalize_observations": True,
+    "reward_scaling": 1.0, "action_repeat": 1, "num_resets_per_eval": 10, "num_evals": 4, "num_eval_envs": 128,
+    "num_timesteps": 20_000_000,
+}
+POLICY_LAYERS, VALUE_LAYERS = (32,) * 4, (256,) * 5
+EVAL_SEED = 12345
+
+
+class _Budget(Exception):
+  """Raised from brax's per-evaluation callback once the wall budget is spent."""
+
+
+def device_slug() -> str:
+  kind = jax.devices()[0].device_kind
+  return re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_") or jax.default_backend()
+
+
+def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None) -> dict:
+  """One brax PPO run, then the 1024-episode evaluation of its deterministic policy; a result row."""
+  settings = dict(RL_SETTINGS.get(task, {}))
+  env = tasks.make(task, damage_weight=weight, **settings)
+  episode_length = env.unwrapped.episode_length
+  curve, last = [], {}
+  t_start = time.time()
+
+  def progress(step, metrics):
+    curve.append({"env_steps": int(step), "wall_s": round(time.time() - t_start, 1),
+                  "eval_episode_reward": float(metrics.get("eval/episode_reward", np.nan)),
+                  "eval_success": float(metrics.get("eval/episode_success", np.nan))})
+    print(f"  w={weight:g} seed={seed}: {step} env-steps, {curve[-1]['wall_s']} s, "
+          f"eval reward {curve[-1]['eval_episode_reward']:.2f}", flush=True)
+
+  def keep_params(step, make_policy, params):
+    last.update(step=int(step), make_policy=make_policy, params=params)
+    if budget_s is not None and step > 0 and time.time() - t_start > budget_s:
+      raise _Budget
+
+  stopped_early = False
+  try:
+    brax_ppo.train(
+        environment=env, num_timesteps=cfg["num_timesteps"], num_envs=cfg["num_envs"],
+        episode_length=episode_length, action_repeat=cfg["action_repeat"], learning_rate=cfg["learning_rate"],
+        entropy_cost=cfg["entropy_cost"], discounting=cfg["discounting"], unroll_length=cfg["unroll_length"],
+        batch_size=cfg["batch_size"], num_minibatches=cfg["num_minibatches"],
+        num_updates_per_batch=cfg["num_updates_per_batch"], num_resets_per_eval=cfg["num_resets_per_eval"],
+        normalize_observations=cfg["normalize_observations"], reward_scaling=cfg["reward_scaling"],
+        network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=POLICY_LAYERS,
+                                          value_hidden_layer_sizes=VALUE_LAYERS),
+        num_evals=cfg["num_evals"], num_eval_envs=cfg["num_eval_envs"], seed=seed,
+        progress_fn=progress, policy_params_fn=keep_params)
+  except _Budget:
+    stopped_early = True
+  train_s = time.time() - t_start
+
+  make_policy = last["make_policy"]
+
+  def apply(params, state, rng):
+    return make_policy(params, deterministic=True)(state.obs, rng)[0]
+
+  t0 = time.time()
+  res = evaluate(env, parametrized_policy(apply, last["params"]), episodes=cfg["eval_episodes"], seed=EVAL_SEED)
+  m = res["metrics"]
+  return {
+      "task": task, "task_settings": settings, "damage_weight": weight, "seed": seed,
+      "reward": "task reward only" if weight == 0 else f"task + damage penalty, w = {weight:g}",
+      "completion": m["completion"], "safe_completion": m["safe_completion"], "avg_env_health": m["avg_health"],
+      "episode_cost": m["cost_mean"], "task_return": m.get("task_return"), "eval_episodes": m["episodes"],
+      "env_steps": last["step"], "train_wall_s": round(train_s, 1), "eval_wall_s": round(time.time() - t0, 1),
+      "stopped_by_budget": stopped_early, "curve": curve,
+  }
+
+
+def render_md(doc: dict) -> str:
+  lines = [
+      f"# Brax PPO (brax.training.agents.ppo.train) on {doc['task']}: task-only vs damage penalty",
+      "",
+      f"Device: {doc['device']}. Recipe: MuJoCo Playground 0.2.0 PandaPickCube PPO settings, with the "
+      f"command line's overrides (last call: {', '.join(f'{k} {v}' for k, v in doc['recipe'].items())}; "
+      f"policy MLP {'×'.join(map(str, POLICY_LAYERS[:1]))}×{len(POLICY_LAYERS)}, value MLP "
+      f"{VALUE_LAYERS[0]}×{len(VALUE_LAYERS)}), episode length = the task's. Task settings: "
+      f"{doc['task_settings'] or 'defaults'}. Each final deterministic policy scored by "
+      f"`train.evaluate.evaluate` on the row's eval episodes (seed {EVAL_SEED}).",
+      "",
+      "| reward | seed | env-steps | train wall s (incl. compile) | completion | safe completion | avg env health "
+      "| episode cost | eval episodes | command |",
+      "|---|---|---|---|---|---|---|---|---|---|",
+  ]
+  for r in doc["rows"]:
+    lines.append(
+        f"| {r['reward']} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
+        f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
+        f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
+        f"| {r['eval_episodes']} | `{r['command']}` |")
+  return "\n".join(lines) + "\n"
+
+
+def _csv(text, cast, field):
+  try:
+    vals = [cast(x) for x in text.split(",") if x.strip()]
+  except ValueError:
+    raise ValueError(f"{field}: comma-separated {cast.__name__}s, got {text!r}") from None
+  if not vals:
+    raise ValueError(f"{field}: give at least one value, got {text!r}")
+  return vals
+
+
+def parse_args(argv=None):
+  p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+  pc = PLAYGROUND_PANDA_PICK_CUBE
+  p.add_argument("--task", default="place_plate")
+  p.add_argument("--damage-weights", default="0,2", help="comma-separated w (0 = task reward only)")
+  p.add_argument("--seeds", default="0,1,2")
+  p.add_argument("--num-timesteps", type=int, default=pc["num_timesteps"])
+  p.add_argument("--budget-seconds", type=float, default=None,
+                 help="stop a run at the first evaluation after this much wall time (s)")
+  p.add_argument("--num-envs", type=int, default=pc["num_envs"])
+  p.add_argument("--batch-size", type=int, default=pc["batch_size"])
+  p.add_argument("--num-minibatches", type=int, default=pc["num_minibatches"])
+  p.add_argument("--unroll-length", type=int, default=pc["unroll_length"])
+  p.add_argument("--num-evals", type=int, default=pc["num_evals"])
+  p.add_argument("--num-eval-envs", type=int, default=pc["num_eval_envs"])
+  p.add_argument("--num-resets-per-eval", type=int, default=pc["num_resets_per_eval"])
+  p.add_argument("--eval-episodes", type=int, default=1024)
+  p.add_argument("--out-dir", default=RESULTS)
+  p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
+  a = p.parse_args(argv)
+  tasks.task_class(a.task)  # ValueError listing the valid names, before anything compiles
+  a.weights = _csv(a.damage_weights, float, "damage_weights")
+  a.seed_list = _csv(a.seeds, int, "seeds")
+  if any(not np.isfinite(w) or w < 0 for w in a.weights):
+    raise ValueError(f"damage_weights: each must be a finite number >= 0, got {a.weights}")
+  if any(s < 0 for s in a.seed_list):
+    raise ValueError(f"seeds: each must be >= 0, got {a.seed_list}")
+  for name in ("num_timesteps", "num_envs", "batch_size", "num_minibatches", "unroll_length", "num_evals",
+               "num_eval_envs", "eval_episodes"):
+    if getattr(a, name) < 1:
+      raise ValueError(f"{name}: must be >= 1, got {getattr(a, name)}")
+  if a.num_resets_per_eval < 0:
+    raise ValueError(f"num_resets_per_eval: must be >= 0, got {a.num_resets_per_eval}")
+  if (a.batch_size * a.num_minibatches) % a.num_envs:
+    raise ValueError(f"num_envs: must divide batch_size × num_minibatches ({a.batch_size * a.num_minibatches}), "
+                     f"got {a.num_envs}")
+  if a.budget_seconds is not None and a.budget_seconds <= 0:
+    raise ValueError(f"budget_seconds: must be > 0, got {a.budget_seconds}")
+  return a
+
+
+def main(argv=None) -> int:
+  a = parse_args(argv)
+  command = "python benchmarks/rl_brax_ppo.py " + " ".join(
+      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+  cfg = dict(PLAYGROUND_PANDA_PICK_CUBE, num_timesteps=a.num_timesteps, num_envs=a.num_envs,
+             batch_size=a.batch_size, num_minibatches=a.num_minibatches, unroll_length=a.unroll_length,
+             num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
+             eval_episodes=a.eval_episodes)
+  stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
+  doc = {"task": a.task, "task_settings": RL_SETTINGS.get(a.task, {}), "device": jax.devices()[0].device_kind,
+         "backend": jax.default_backend(), "jax": jax.__version__, "machine": platform.machine(),
+         "recipe": {k: v for k, v in cfg.items() if k != "eval_episodes"}, "rows": []}
+  if os.path.exists(stem + ".json"):  # keep rows of other (weight, seed) runs: one call per run builds one table
+    import json
+
+    with open(stem + ".json") as f:
+      doc["rows"] = json.load(f).get("rows", [])
+  for w in a.weights:
+    for s in a.seed_list:
+      print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
+      row = train_one(a.task, w, s, cfg, a.budget_seconds)
+      row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+                 recipe=doc["recipe"])
+      print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "
+            f"{row['env_steps']} env-steps, {row['train_wall_s']} s", flush=True)
+      doc["rows"] = [r for r in doc["rows"] if (r["damage_weight"], r["seed"]) != (w, s)] + [row]
+      doc["rows"].sort(key=lambda r: (r["damage_weight"], r["seed"]))
+      write_json(stem + ".json", doc)  # after every run: a timeout keeps the finished ones
+      write_text(stem + ".md", render_md(doc))
+  print(f"wrote {stem}.json / .md")
+  return 0
+
+
+if __name__ == "__main__":
+  raise SystemExit(main())
