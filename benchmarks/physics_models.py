@@ -6,7 +6,8 @@ under a slide-mounted "hand". Four variants differ only in the damage config:
 
 * ``base``        — mechanical/thermal/fluid DEMs, no temperature, no liquid;
 * ``temperature`` — + the burner as a 300 °C heat source;
-* ``liquid``      — + ``--particles`` particles in the glass;
+* ``liquid``      — + ``--particles`` particles in the glass (pairs found on a grid: cell lists);
+* ``liquid_all``  — the same liquid with every particle pair examined (``pair_search: all``);
 * ``both``        — temperature and liquid.
 
 Each variant runs ``jit(fori_loop(vmap(physics.step)))`` over ``--envs``
@@ -74,6 +75,7 @@ def configs(particles: int) -> dict:
       "base": {"entities": entities},
       "temperature": {"entities": entities, "temperature": temperature},
       "liquid": {"entities": entities, "liquid": liquid},
+      "liquid_all": {"entities": entities, "liquid": {**liquid, "pair_search": "all"}},
       "both": {"entities": entities, "temperature": temperature, "liquid": liquid},
   }
 
@@ -135,7 +137,7 @@ def main(argv=None) -> int:
   p.add_argument("--steps", type=int, default=5, help="env steps timed per variant (after an ahead-of-time compile)")
   p.add_argument("--substeps", type=int, default=5, help="physics substeps (4 ms) per env step")
   p.add_argument("--particles", type=int, default=128)
-  p.add_argument("--variants", default="base,temperature,liquid,both")
+  p.add_argument("--variants", default="base,temperature,liquid,liquid_all,both")
   p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/physics_models_<device>_<time>.json)")
   a = p.parse_args(argv)
   for k in ("envs", "steps", "substeps", "particles"):
@@ -149,6 +151,8 @@ def main(argv=None) -> int:
 
   os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
   import jax
+
+  from mjx_damage import io
 
   results = [measure(v, cfgs[v], a.envs, a.steps, a.substeps) for v in variants]
   device = jax.devices()[0]
@@ -170,9 +174,7 @@ def main(argv=None) -> int:
   }
   out = a.out or os.path.join(os.path.dirname(os.path.abspath(__file__)), "results",
                               f"physics_models_{device.platform}_{stamp}.json")
-  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-  with open(out, "w") as f:
-    json.dump(record, f, indent=2)
+  io.write_json(out, record)
   print(f"wrote {out}")
   return 0
 
