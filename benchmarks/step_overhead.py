@@ -25,6 +25,10 @@ sampling, as ``train/``), ``zeros`` or the task's scripted ``safe`` policy.
     python benchmarks/step_overhead.py --envs 64 --steps 10 --variants task,raw   # CPU smoke
 
 Writes ``benchmarks/results/step_overhead_<device>.{json,md}`` (``--out-dir``) with the command.
+A run merges into an existing file of the same device, batch size, steps and policy:
+its tasks' rows are replaced and the others kept (so one long measurement can be
+split into one command per task, e.g. under a per-command time limit); the
+``commands`` list records every command that contributed.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import json
 import os
 import platform
 import shlex
@@ -159,7 +164,7 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 def markdown(record: dict) -> str:
   lines = [
-      f"Command: `{record['command']}`  ",
+      *(f"Command: `{c}`  " for c in record["commands"]),
       f"Device: {record['device']} · {record['envs']} envs · {record['steps']} control steps per timed call · "
       f"policy {record['policy']} · {record['timestamp_utc']}",
       "",
@@ -226,6 +231,14 @@ def main(argv=None) -> int:
       "results": summarise(rows),
   }
   stem = os.path.join(a.out_dir, f"step_overhead_{device.platform}")
+  record["commands"] = [record["command"]]
+  if os.path.exists(stem + ".json"):
+    with open(stem + ".json") as f:
+      old = json.load(f)
+    if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy")):
+      kept = [r for r in old["results"] if r["task"] not in names]
+      record["results"] = summarise(kept + rows)
+      record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
   io.write_json(stem + ".json", record)
   io.write_text(stem + ".md", markdown(record))
   print(f"wrote {stem}.json, {stem}.md")
