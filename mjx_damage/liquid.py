@@ -131,10 +131,6 @@ class LiquidState:
   vel: jax.Array
 
 
-
-
-
-
 def _lattice(n: int, size: np.ndarray, spacing: float, field: str) -> np.ndarray:
   """n points on a cubic lattice inside the box of half-sizes ``size``, lowest layers first."""
   counts = np.floor(2 * size / spacing + 1e-9).astype(int) + 1
