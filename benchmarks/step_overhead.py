@@ -97,7 +97,7 @@ def applicable(task, variant: str) -> bool:
   return True
 
 
-def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy_kind: str) -> dict:
+def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy_kind: str, clock=time.perf_counter) -> dict:
   import jax
   import jax.numpy as jnp
 
@@ -139,9 +139,9 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   carry = jax.block_until_ready(compiled(carry))  # warm-up
   best = float("inf")
   for _ in range(repeats):
-    t0 = time.perf_counter()
+    t0 = clock()
     carry = jax.block_until_ready(compiled(carry))
-    best = min(best, time.perf_counter() - t0)
+    best = min(best, clock() - t0)
   d = carry if variant == "raw" else carry[0].pipeline_state
   row = {
       "task": name, "variant": variant, "envs": envs, "steps": steps,
@@ -166,7 +166,7 @@ def markdown(record: dict) -> str:
   lines = [
       *(f"Command: `{c}`  " for c in record["commands"]),
       f"Device: {record['device']} · {record['envs']} envs · {record['steps']} control steps per timed call · "
-      f"policy {record['policy']} · {record['timestamp_utc']}",
+      f"policy {record['policy']} · {record['clock']} clock · {record['timestamp_utc']}",
       "",
       "ratio = env-steps/s over `raw` (n_substeps × mjx.step, same model and batch); share = time the variant "
       "removes from the task step (1 − t_variant / t_task).",
@@ -189,6 +189,9 @@ def main(argv=None) -> int:
   p.add_argument("--repeats", type=int, default=2, help="timed calls per variant (best kept)")
   p.add_argument("--variants", default=",".join(VARIANTS), help=f"comma list of {', '.join(VARIANTS)}")
   p.add_argument("--policy", default="mlp", choices=POLICIES)
+  p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                 help="cpu: process CPU seconds (all threads) — steadier than wall time on a shared, loaded CPU; "
+                      "use wall on a GPU")
   p.add_argument("--out-dir", default=os.path.join(HERE, "results"))
   a = p.parse_args(argv)
   for k in ("envs", "steps", "repeats"):
@@ -214,7 +217,8 @@ def main(argv=None) -> int:
     probe = tasks.make(n).unwrapped
     for v in variants:
       if applicable(probe, v):
-        rows.append(measure(n, v, a.envs, a.steps, a.repeats, a.policy))
+        rows.append(measure(n, v, a.envs, a.steps, a.repeats, a.policy,
+                            time.perf_counter if a.clock == "wall" else time.process_time))
   device = jax.devices()[0]
   record = {
       "benchmark": "step_overhead",
@@ -228,6 +232,7 @@ def main(argv=None) -> int:
       "steps": a.steps,
       "repeats": a.repeats,
       "policy": a.policy,
+      "clock": a.clock,
       "results": summarise(rows),
   }
   stem = os.path.join(a.out_dir, f"step_overhead_{device.platform}")
@@ -235,7 +240,7 @@ def main(argv=None) -> int:
   if os.path.exists(stem + ".json"):
     with open(stem + ".json") as f:
       old = json.load(f)
-    if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy")):
+    if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy", "clock")):
       kept = [r for r in old["results"] if r["task"] not in names]
       record["results"] = summarise(kept + rows)
       record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
