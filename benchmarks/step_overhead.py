@@ -14,7 +14,11 @@ steps of ``vmap(step)``, compiled ahead of time and timed after one warm-up call
 * ``no_temperature``— the task step with the temperature model not advanced (tasks with heat);
 * ``no_damage``     — the task step with the substeps as plain ``mjx.step`` (no damage
                       signals, temperature or liquid): policy, observation, reward, wrapper;
-* ``raw``           — ``n_substeps × mjx.step`` of the same model and batch (no policy, no task).
+* ``raw``           — ``n_substeps × mjx.step`` of the same model and batch (no policy, no task),
+                      controls held at their reset values;
+* ``raw_moving``    — the same with the controls the task's ``robot.ctrl`` makes of uniform
+                      random actions each step: MJX's solver stops early once every env has
+                      converged, so a moving robot can cost more physics than one at rest.
 
 The ``ratio`` column is env-steps/s of the variant over ``raw``; ``share of task
 step`` is the time the variant removes, 1 − t_variant / t_task. The policy
@@ -25,9 +29,10 @@ sampling, as ``train/``), ``zeros`` or the task's scripted ``safe`` policy.
     python benchmarks/step_overhead.py --envs 64 --steps 10 --variants task,raw   # CPU smoke
 
 Writes ``benchmarks/results/step_overhead_<device>.{json,md}`` (``--out-dir``) with the command.
-A run merges into an existing file of the same device, batch size, steps and policy:
-its tasks' rows are replaced and the others kept (so one long measurement can be
-split into one command per task, e.g. under a per-command time limit); the
+A run merges into an existing file of the same device, batch size, steps, policy and
+clock: the (task, variant) rows it measured are replaced and the others kept (so one
+long measurement can be split into several commands, e.g. under a per-command time
+limit); the
 ``commands`` list records every command that contributed.
 """
 
@@ -46,7 +51,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))  # the repo's packages, wherever this is run from
 
-VARIANTS = ("task", "zeros_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage", "raw")
+VARIANTS = ("task", "zeros_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage", "raw",
+            "raw_moving")
 POLICIES = ("mlp", "zeros", "scripted")
 
 
@@ -114,15 +120,23 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   keys = jax.random.split(jax.random.PRNGKey(0), envs)
   state = jax.jit(jax.vmap(stepper.reset))(keys)
 
-  if variant == "raw":
-    n = task.n_substeps
+  if variant in ("raw", "raw_moving"):
+    n, moving = task.n_substeps, variant == "raw_moving"
+
+    def one(d, k):
+      if moving:
+        a = jax.random.uniform(k, (env.action_size,), minval=-1.0, maxval=1.0)
+        d = d.replace(ctrl=task.robot.ctrl(d, a, task.ws_lo, task.ws_hi))
+      return physics.step_without_damage(task.sys, d, n)
 
     def run(carry):
-      def body(d, _):
-        return jax.vmap(lambda d: physics.step_without_damage(task.sys, d, n))(d), None
+      def body(c, _):
+        d, k = c
+        k, kp = jax.random.split(k)
+        return (jax.vmap(one)(d, jax.random.split(kp, envs)), k), None
       return jax.lax.scan(body, carry, None, length=steps)[0]
 
-    carry = state.pipeline_state
+    carry = (state.pipeline_state, jax.random.PRNGKey(1))
   else:
     def run(carry):
       def body(c, _):
@@ -142,7 +156,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
     t0 = clock()
     carry = jax.block_until_ready(compiled(carry))
     best = min(best, clock() - t0)
-  d = carry if variant == "raw" else carry[0].pipeline_state
+  d = carry[0] if variant.startswith("raw") else carry[0].pipeline_state
   row = {
       "task": name, "variant": variant, "envs": envs, "steps": steps,
       "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s,
@@ -241,7 +255,8 @@ def main(argv=None) -> int:
     with open(stem + ".json") as f:
       old = json.load(f)
     if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy", "clock")):
-      kept = [r for r in old["results"] if r["task"] not in names]
+      new = {(r["task"], r["variant"]) for r in rows}
+      kept = [r for r in old["results"] if (r["task"], r["variant"]) not in new]
       record["results"] = summarise(kept + rows)
       record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
   io.write_json(stem + ".json", record)
