@@ -168,6 +168,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
 
 def summarise(rows: list[dict]) -> list[dict]:
   """Adds ``ratio_to_raw`` and ``share_of_task_step`` to each row (per task)."""
+  rows = sorted(rows, key=lambda r: (r["task"], VARIANTS.index(r["variant"])))
   by = {(r["task"], r["variant"]): r for r in rows}
   for r in rows:
     raw, task = by.get((r["task"], "raw")), by.get((r["task"], "task"))
