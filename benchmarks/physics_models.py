@@ -6,12 +6,15 @@ under a slide-mounted "hand". Four variants differ only in the damage config:
 
 * ``base``        — mechanical/thermal/fluid DEMs, no temperature, no liquid;
 * ``temperature`` — + the burner as a 300 °C heat source;
-* ``liquid``      — + ``--particles`` particles in the glass;
+* ``liquid``      — + ``--particles`` particles in the glass (default ``pair_search: auto``);
+* ``liquid_grid`` — the same liquid with pairs found by cell lists (``pair_search: grid``);
 * ``both``        — temperature and liquid.
 
 Each variant runs ``jit(fori_loop(vmap(physics.step)))`` over ``--envs``
 environments for ``--steps`` env steps of ``--substeps`` physics substeps and
-records env-steps/s of one call after an ahead-of-time compile. One JSON per
+records env-steps/s of the best of ``--repeats`` calls after an ahead-of-time compile
+(``--clock cpu`` times process CPU seconds instead of wall seconds: steadier on a
+shared machine, and the same thing on an otherwise idle one with all cores busy). One JSON per
 run under ``benchmarks/results/`` (or ``--out``), with the exact command.
 
     .venv/bin/python benchmarks/physics_models.py               # 1024 envs × 128 particles
@@ -74,11 +77,12 @@ def configs(particles: int) -> dict:
       "base": {"entities": entities},
       "temperature": {"entities": entities, "temperature": temperature},
       "liquid": {"entities": entities, "liquid": liquid},
+      "liquid_grid": {"entities": entities, "liquid": {**liquid, "pair_search": "grid"}},
       "both": {"entities": entities, "temperature": temperature, "liquid": liquid},
   }
 
 
-def measure(name: str, config: dict, envs: int, steps: int, substeps: int) -> dict:
+def measure(name: str, config: dict, envs: int, steps: int, substeps: int, clock=time.perf_counter, repeats: int = 1) -> dict:
   import jax
   import jax.numpy as jnp
   import mujoco
@@ -108,11 +112,14 @@ def measure(name: str, config: dict, envs: int, steps: int, substeps: int) -> di
     return jax.lax.fori_loop(0, steps, lambda _, c: step(*c), (d, ds))
 
   t0 = time.perf_counter()
-  compiled = run.lower(d, ds).compile()  # ahead of time: the timed call below is the first run
+  compiled = run.lower(d, ds).compile()  # ahead of time: no compilation inside the timed calls
   compile_s = time.perf_counter() - t0
-  t0 = time.perf_counter()
-  d2, ds2 = jax.block_until_ready(compiled(d, ds))
-  wall = time.perf_counter() - t0
+  wall = float("inf")
+  for _ in range(repeats):  # each call continues from the last one's state
+    t0 = clock()
+    d, ds = jax.block_until_ready(compiled(d, ds))
+    wall = min(wall, clock() - t0)
+  d2, ds2 = d, ds
   ok = bool(jnp.all(jnp.isfinite(ds2.temperature))) and (
       ds2.liquid is None or bool(jnp.all(jnp.isfinite(ds2.liquid.pos))))
   out = {
@@ -135,10 +142,13 @@ def main(argv=None) -> int:
   p.add_argument("--steps", type=int, default=5, help="env steps timed per variant (after an ahead-of-time compile)")
   p.add_argument("--substeps", type=int, default=5, help="physics substeps (4 ms) per env step")
   p.add_argument("--particles", type=int, default=128)
-  p.add_argument("--variants", default="base,temperature,liquid,both")
+  p.add_argument("--variants", default="base,temperature,liquid,liquid_grid,both")
+  p.add_argument("--repeats", type=int, default=1, help="timed calls per variant (best kept)")
+  p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                 help="cpu: process CPU time (all threads), steadier than wall time on a shared, loaded machine")
   p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/physics_models_<device>_<time>.json)")
   a = p.parse_args(argv)
-  for k in ("envs", "steps", "substeps", "particles"):
+  for k in ("envs", "steps", "substeps", "particles", "repeats"):
     if getattr(a, k) < 1:
       p.error(f"--{k}: must be >= 1")
   cfgs = configs(a.particles)
@@ -150,7 +160,10 @@ def main(argv=None) -> int:
   os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
   import jax
 
-  results = [measure(v, cfgs[v], a.envs, a.steps, a.substeps) for v in variants]
+  from mjx_damage import io
+
+  clock = time.perf_counter if a.clock == "wall" else time.process_time
+  results = [measure(v, cfgs[v], a.envs, a.steps, a.substeps, clock, a.repeats) for v in variants]
   device = jax.devices()[0]
   stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
   record = {
@@ -166,13 +179,13 @@ def main(argv=None) -> int:
       "substeps": a.substeps,
       "timestep_s": 0.004,
       "particles": a.particles,
+      "clock": a.clock,
+      "repeats": a.repeats,
       "results": results,
   }
   out = a.out or os.path.join(os.path.dirname(os.path.abspath(__file__)), "results",
                               f"physics_models_{device.platform}_{stamp}.json")
-  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-  with open(out, "w") as f:
-    json.dump(record, f, indent=2)
+  io.write_json(out, record)
   print(f"wrote {out}")
   return 0
 

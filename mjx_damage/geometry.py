@@ -13,6 +13,8 @@ lists what the models accept, and they skip the rest at build time.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -28,34 +30,68 @@ TYPE_NAMES = {PLANE: "plane", SPHERE: "sphere", CAPSULE: "capsule", CYLINDER: "c
 
 _EPS = 1e-9
 
+# Internally a batch of 3-vectors is three arrays of one shape ("planes": x, y, z),
+# not one array with a trailing axis of 3: every operation is then a contiguous,
+# vectorisable elementwise op (a trailing axis of 3 defeats XLA:CPU's vector units)
+# and the particle–geom pass fuses into one loop on any backend.
 
-def _unit(v: jax.Array, fallback: jax.Array) -> jax.Array:
-  """v/‖v‖, or ``fallback`` where ‖v‖ ≈ 0 (a point exactly on an axis or centre)."""
-  n2 = jnp.sum(v * v, axis=-1, keepdims=True)
+
+def _unit(v: list, fallback: tuple) -> list:
+  """v/‖v‖ (planes), or the constant ``fallback`` where ‖v‖ ≈ 0 (a point exactly on an axis or centre)."""
+  n2 = sum(c * c for c in v)
   safe = n2 > _EPS * _EPS
-  return jnp.where(safe, v / jnp.sqrt(jnp.where(safe, n2, 1.0)), fallback)
+  inv = jax.lax.rsqrt(jnp.where(safe, n2, 1.0))
+  return [jnp.where(safe, c * inv, f) for c, f in zip(v, fallback)]
 
 
-def _rounded_box(d: jax.Array, sign: jax.Array) -> tuple[jax.Array, jax.Array]:
-  """SDF and normal of an axis-aligned box from d = |q| − half_size (any dimension k).
+def _rounded_box(d: list, sign: list) -> tuple[jax.Array, list]:
+  """SDF and normal (planes) of an axis-aligned box from d_k = |q_k| − half_size_k (k = 2 or 3 planes).
 
   Outside: Euclidean distance to the box; inside: minus the distance to the
-  nearest face (its normal is that face's axis).
+  nearest face (its normal is that face's axis; ties go to the lowest axis).
   """
-  outside = jnp.maximum(d, 0.0)
-  out_len = jnp.sqrt(jnp.sum(outside * outside, axis=-1))
-  inside = jnp.minimum(jnp.max(d, axis=-1), 0.0)
-  phi = out_len + inside
-  k = d.shape[-1]
-  face = jax.nn.one_hot(jnp.argmax(d, axis=-1), k, dtype=d.dtype)
-  n_in = face * sign
-  n_out = outside * sign / jnp.maximum(out_len, _EPS)[..., None]
-  n = jnp.where((out_len > 0)[..., None], n_out, n_in)
+  outside = [jnp.maximum(c, 0.0) for c in d]
+  out_len = jnp.sqrt(sum(c * c for c in outside))
+  dmax = functools.reduce(jnp.maximum, d)
+  phi = out_len + jnp.minimum(dmax, 0.0)
+  inv = 1.0 / jnp.maximum(out_len, _EPS)
+  is_out = out_len > 0
+  taken = jnp.zeros_like(dmax, dtype=bool)
+  n = []
+  for c, o, s in zip(d, outside, sign):  # static: 2 or 3 axes
+    face = (c >= dmax) & ~taken
+    taken = taken | face
+    n.append(jnp.where(is_out, o * s * inv, jnp.where(face, s, 0.0)))
   return phi, n
 
 
 def _sign(q: jax.Array) -> jax.Array:
   return jnp.where(q >= 0, 1.0, -1.0).astype(q.dtype)
+
+
+def sdf_planes(gtype: int, q: list, size: list) -> tuple[jax.Array, list]:
+  """:func:`sdf` on planes: ``q`` = [qx, qy, qz] and ``size`` = [s0, s1, s2], arrays broadcasting together.
+
+  Returns phi and the normal as planes [nx, ny, nz].
+  """
+  qx, qy, qz = q
+  zero, one = jnp.zeros_like(qx), jnp.ones_like(qx)
+  if gtype == PLANE:
+    # MuJoCo collides against the infinite plane z = 0 (size is visual only).
+    return qz + 0.0 * qx, [zero, zero, one]
+  if gtype == SPHERE:
+    return jnp.sqrt(qx * qx + qy * qy + qz * qz) - size[0], _unit(q, (0.0, 0.0, 1.0))
+  if gtype == CAPSULE:
+    r = [qx, qy, qz - jnp.clip(qz, -size[1], size[1])]
+    return jnp.sqrt(sum(c * c for c in r)) - size[0], _unit(r, (0.0, 0.0, 1.0))
+  if gtype == CYLINDER:
+    rho = jnp.sqrt(qx * qx + qy * qy)
+    phi, (n_r, n_z) = _rounded_box([rho - size[0], jnp.abs(qz) - size[1]], [one, _sign(qz)])
+    rx, ry = _unit([qx, qy], (1.0, 0.0))
+    return phi, [rx * n_r, ry * n_r, n_z]
+  if gtype == BOX:
+    return _rounded_box([jnp.abs(c) - s for c, s in zip(q, size)], [_sign(c) for c in q])
+  raise ValueError(f"geom type: {gtype} is not a supported primitive ({', '.join(TYPE_NAMES.values())})")
 
 
 def sdf(gtype: int, q: jax.Array, size: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -71,28 +107,9 @@ def sdf(gtype: int, q: jax.Array, size: jax.Array) -> tuple[jax.Array, jax.Array
     phi: f32[...] signed distance, m (< 0 inside the solid).
     normal: f32[..., 3] outward unit normal of the nearest surface point, geom frame.
   """
-  ez = jnp.broadcast_to(jnp.array([0.0, 0.0, 1.0], q.dtype), q.shape)
-  if gtype == PLANE:
-    # MuJoCo collides against the infinite plane z = 0 (size is visual only).
-    return q[..., 2], ez
-  if gtype == SPHERE:
-    return jnp.linalg.norm(q, axis=-1) - size[..., 0], _unit(q, ez)
-  if gtype == CAPSULE:
-    c = jnp.clip(q[..., 2], -size[..., 1], size[..., 1])
-    r = q - jnp.stack([jnp.zeros_like(c), jnp.zeros_like(c), c], axis=-1)
-    return jnp.linalg.norm(r, axis=-1) - size[..., 0], _unit(r, ez)
-  if gtype == CYLINDER:
-    rho = jnp.sqrt(q[..., 0] ** 2 + q[..., 1] ** 2)
-    d = jnp.stack([rho - size[..., 0], jnp.abs(q[..., 2]) - size[..., 1]], axis=-1)
-    sgn = jnp.stack([jnp.ones_like(rho), _sign(q[..., 2])], axis=-1)
-    phi, n2 = _rounded_box(d, sgn)
-    ex = jnp.broadcast_to(jnp.array([1.0, 0.0], q.dtype), q[..., :2].shape)
-    radial = _unit(q[..., :2], ex)
-    n = jnp.concatenate([radial * n2[..., :1], n2[..., 1:]], axis=-1)
-    return phi, n
-  if gtype == BOX:
-    return _rounded_box(jnp.abs(q) - size, _sign(q))
-  raise ValueError(f"geom type: {gtype} is not a supported primitive ({', '.join(TYPE_NAMES.values())})")
+  size = jnp.broadcast_to(size, jnp.broadcast_shapes(size.shape, q.shape))
+  phi, n = sdf_planes(gtype, [q[..., k] for k in range(3)], [size[..., k] for k in range(3)])
+  return phi, jnp.stack(jnp.broadcast_arrays(*n), axis=-1)
 
 
 def group_by_type(geom_ids, geom_type: np.ndarray) -> tuple[tuple[int, np.ndarray], ...]:
@@ -104,6 +121,32 @@ def group_by_type(geom_ids, geom_type: np.ndarray) -> tuple[tuple[int, np.ndarra
     if ids.size:
       out.append((t, ids.astype(np.int32)))
   return tuple(out)
+
+
+def points_to_geoms_planes(groups, d, m, points: jax.Array) -> tuple[jax.Array, list]:
+  """:func:`points_to_geoms` with the normals as planes: (phi f32[P, G], [nx, ny, nz] f32[P, G] each).
+
+  Every per-pair quantity is an elementwise expression of [P, G] planes (the
+  rotations are 9 multiply-adds, not a batched matrix product), so XLA fuses
+  the whole pass into one loop over particle–geom pairs.
+  """
+  P = points.shape[0]
+  if not groups:
+    z = jnp.zeros((P, 0), points.dtype)
+    return z, [z, z, z]
+  phis, normals = [], []
+  for gtype, ids in groups:
+    pos = d.geom_xpos[ids]  # [G, 3]
+    mat = d.geom_xmat[ids].reshape(-1, 3, 3)  # [G, 3, 3] columns = geom axes in world
+    size = jnp.asarray(m.geom_size)[ids]
+    rel = [points[:, k : k + 1] - pos[None, :, k] for k in range(3)]  # [P, G] each
+    q = [sum(rel[j] * mat[None, :, j, i] for j in range(3)) for i in range(3)]  # Rᵀ·(p − c)
+    phi, n_local = sdf_planes(gtype, q, [size[None, :, k] for k in range(3)])
+    phis.append(phi)
+    normals.append([sum(mat[None, :, i, j] * n_local[j] for j in range(3)) for i in range(3)])  # R·n
+  phi = jnp.concatenate(phis, axis=1)
+  return phi, [jnp.concatenate([jnp.broadcast_to(n[i], phi_g.shape) for n, phi_g in zip(normals, phis)], axis=1)
+               for i in range(3)]
 
 
 def points_to_geoms(groups, d, m, points: jax.Array) -> tuple[jax.Array, jax.Array, np.ndarray]:
@@ -119,18 +162,6 @@ def points_to_geoms(groups, d, m, points: jax.Array) -> tuple[jax.Array, jax.Arr
     phi: f32[P, G] signed distances, m; normal: f32[P, G, 3] world-frame outward normals;
     order: i32[G] geom id of each column (numpy, static).
   """
-  phis, normals = [], []
-  for gtype, ids in groups:
-    pos = d.geom_xpos[ids]  # [G, 3]
-    mat = d.geom_xmat[ids].reshape(-1, 3, 3)  # [G, 3, 3] columns = geom axes in world
-    size = jnp.asarray(m.geom_size)[ids]
-    rel = points[:, None, :] - pos[None]  # [P, G, 3]
-    q = jnp.einsum("gji,pgj->pgi", mat, rel)  # world → geom frame: Rᵀ·(p − c)
-    phi, n_local = sdf(gtype, q, size[None])
-    phis.append(phi)
-    normals.append(jnp.einsum("gij,pgj->pgi", mat, n_local))
+  phi, n = points_to_geoms_planes(groups, d, m, points)
   order = np.concatenate([ids for _, ids in groups]) if groups else np.zeros((0,), np.int32)
-  if not groups:
-    P = points.shape[0]
-    return jnp.zeros((P, 0), points.dtype), jnp.zeros((P, 0, 3), points.dtype), order
-  return jnp.concatenate(phis, axis=1), jnp.concatenate(normals, axis=1), order
+  return phi, jnp.stack(n, axis=-1), order

@@ -13,7 +13,10 @@ Config (top-level key ``liquid``)::
       damping: 0.5                  # 1/s, linear drag on particle velocity
       friction: 0.02                # in [0, 1], share of tangential velocity removed per substep in contact (low: no angle of repose)
       contact_distance: 0.008       # m, surface gap within which a particle wets a link (default: radius)
-      pair_stiffness: 0.6           # in [0, 1], particle–particle repulsion (0 = off: no O(P²) work)
+      pair_stiffness: 0.6           # in [0, 1], particle–particle repulsion (0 = off: no pair work)
+      pair_search: auto             # grid: cell lists (sort by cell, O(P·C)); all: every pair (O(P²), one fused pass);
+                                    # auto: grid from 1024 particles
+      pair_candidates: 64           # C, partner slots per particle with grid (the 27 cells around it)
       max_speed: 4.0                # m/s, speed clamp (also the tunnelling guard, see below)
       iterations: 2                 # geom projection passes per substep
       exclude: [flame_geom]         # geoms the liquid passes through (besides non-colliding ones)
@@ -22,7 +25,8 @@ Model (position-based dynamics, per physics substep dt, one environment)::
 
     v ← (v + g·dt) / (1 + damping·dt)
     p* = p + v·dt
-    p* += pair repulsion (pairs closer than 2r pushed apart, capped at r/4 per substep)
+    p* += pair repulsion (pairs closer than 2r pushed apart, capped at r/4 per substep;
+          partners from cell lists of side 2.2 r or every pair, see pair_search)
     repeat `iterations` times: for every collidable geom with φ(p*) < r: p* += (r − φ)·n
     v ← (p* − p)/dt;  in contact: tangential v relative to the geom's surface velocity × (1 − friction),
                       approaching normal velocity removed;  ‖v‖ ≤ max_speed
@@ -56,6 +60,7 @@ import numpy as np
 from flax import struct
 
 from mjx_damage import geometry as G
+from mjx_damage import neighbours as NB
 from mjx_damage.validate import check_keys as _check_keys
 from mjx_damage.validate import fail as _fail
 from mjx_damage.validate import mapping as _mapping
@@ -71,11 +76,18 @@ DEFAULTS = {
     "pair_stiffness": 0.6,
     "max_speed": 4.0,
     "iterations": 2,
+    "pair_search": "auto",
+    "pair_candidates": 64,
 }
+PAIR_SEARCHES = ("auto", "grid", "all")
+# "auto" picks the grid from this many particles: below it, every pair in one fused pass is cheaper
+# than sorting into cells (XLA:CPU, benchmarks/physics_models.py: grid ≈ 2.5 µs, all ≈ 0.4 µs·P/128 per particle)
+GRID_FROM = 1024
 _KEYS = ("particles", "radius", "spawn", "damping", "friction", "contact_distance", "pair_stiffness",
-         "max_speed", "iterations", "exclude")
+         "max_speed", "iterations", "exclude", "pair_search", "pair_candidates")
 _SPAWN_KEYS = ("center", "size", "body", "offset")
 _JITTER = 0.05  # × radius: breaks the lattice's symmetry so piles settle naturally
+_SKIN = 1.1  # pairs within 1.1 · 2r count as touching (resting neighbours count)
 
 
 @struct.dataclass
@@ -89,6 +101,8 @@ class LiquidModel:
   pair_stiffness: float = struct.field(pytree_node=False)
   max_speed: float = struct.field(pytree_node=False)
   iterations: int = struct.field(pytree_node=False)
+  pair_search: str = struct.field(pytree_node=False)  # "grid" (cell lists) or "all" (every pair), resolved
+  pair_candidates: int = struct.field(pytree_node=False)  # C, partner slots per particle with "grid"
   spawn_body: int = struct.field(pytree_node=False)  # body id, or −1: world frame
   lattice: np.ndarray = struct.field(pytree_node=False)  # f32[P, 3] spawn points in the spawn frame, m
   spawn_pos: np.ndarray = struct.field(pytree_node=False)  # f32[3] spawn frame origin at reset pose
@@ -98,6 +112,7 @@ class LiquidModel:
   column_link: np.ndarray = struct.field(pytree_node=False)  # i32[G] tracked link of each column or −1
   column_body: np.ndarray = struct.field(pytree_node=False)  # i32[G] body of each column
   column_root: np.ndarray = struct.field(pytree_node=False)  # i32[G] root body of each column
+  column_link_mask: np.ndarray = struct.field(pytree_node=False)  # bool[G, L] column belongs to tracked link l
 
   @property
   def num_particles(self) -> int:
@@ -114,10 +129,6 @@ class LiquidState:
 
   pos: jax.Array
   vel: jax.Array
-
-
-
-
 
 
 def _lattice(n: int, size: np.ndarray, spacing: float, field: str) -> np.ndarray:
@@ -153,6 +164,14 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
   stiff = _number("liquid.pair_stiffness", cfg.get("pair_stiffness", DEFAULTS["pair_stiffness"]), lo=0.0, hi=1.0)
   vmax = _number("liquid.max_speed", cfg.get("max_speed", DEFAULTS["max_speed"]), positive=True)
   iters = _int("liquid.iterations", cfg.get("iterations", DEFAULTS["iterations"]), 1, 8)
+  search = cfg.get("pair_search", DEFAULTS["pair_search"])
+  if search not in PAIR_SEARCHES:
+    _fail("liquid.pair_search", f"expected one of {', '.join(PAIR_SEARCHES)}, got {search!r}")
+  slots = _int("liquid.pair_candidates", cfg.get("pair_candidates", DEFAULTS["pair_candidates"]), 8, MAX_PARTICLES)
+  if search == "auto":
+    search = "grid" if n >= GRID_FROM else "all"
+  if slots >= n - 1:
+    search = "all"  # the grid cannot examine fewer partners than there are
 
   spawn = cfg.get("spawn")
   if not isinstance(spawn, Mapping):
@@ -200,6 +219,7 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
   groups = G.group_by_type(np.array(ids, np.int32), gtype)
   order = np.concatenate([i for _, i in groups]).astype(np.int32) if groups else np.zeros(0, np.int32)
   body = model.geom_bodyid[order].astype(np.int32)
+  column_link = np.asarray(binding.geom_link)[order].astype(np.int32)
   return LiquidModel(
       radius=radius,
       damping=damping,
@@ -208,15 +228,18 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
       pair_stiffness=stiff,
       max_speed=vmax,
       iterations=iters,
+      pair_search=search,
+      pair_candidates=slots,
       spawn_body=int(bid),
       lattice=lattice,
       spawn_pos=spawn_pos.astype(np.float32),
       spawn_mat=spawn_mat.astype(np.float32),
       groups=groups,
       column_geom=order,
-      column_link=np.asarray(binding.geom_link)[order].astype(np.int32),
+      column_link=column_link,
       column_body=body,
       column_root=model.body_rootid[body].astype(np.int32),
+      column_link_mask=column_link[:, None] == np.arange(binding.num_links)[None, :],
   )
 
 
@@ -250,40 +273,67 @@ def spawn(binding, rng, d) -> LiquidState:
   return _spawn_points(lm, rng, d.xpos[lm.spawn_body], d.xmat[lm.spawn_body].reshape(3, 3))
 
 
-def _pairs(lm: LiquidModel, p: jax.Array):
-  """Neighbour geometry of all particle pairs at the predicted positions (one O(P²) pass).
+def _partners(lm: LiquidModel, p: jax.Array):
+  """Pair partners of every particle at the predicted positions ``p`` f32[P, 3].
 
-  Returns:
-    push: f32[P, 3] m, Jacobi correction pushing overlapping pairs apart, capped
-      at r/4 per particle per substep so a dense pile can never shove a particle
-      through a thin wall in one step;
-    near: bool[P, P] pairs touching (within 2.2 r: a 10 % skin so resting neighbours count);
-    nrm: f32[P, P, 3] unit vectors from j to i (0 where not near).
+  Returns ``(take, valid)``: ``take(x)`` maps per-particle vectors x f32[P, 3]
+  to their partners' components, three f32[P, C] (``all``: C = P, rows broadcast;
+  ``grid``: the cell lists' candidate slots), ``valid`` bool[P, C].
   """
-  diff = p[:, None, :] - p[None, :, :]  # [P, P, 3]
-  d2 = jnp.sum(diff * diff, axis=-1)
-  two_r = 2.0 * lm.radius
-  skin = 1.1 * two_r
-  near = (d2 < skin * skin) & ~jnp.eye(p.shape[0], dtype=bool)
-  dist = jnp.sqrt(jnp.where(near, d2, 1.0))
-  nrm = jnp.where(near[..., None], diff / jnp.maximum(dist, 1e-6)[..., None], 0.0)
-  overlap = jnp.maximum(two_r - dist, 0.0) * near
-  push = 0.5 * lm.pair_stiffness * jnp.einsum("ij,ijk->ik", overlap, nrm)
+  P = lm.num_particles
+  if lm.pair_search == "all":
+    # broadcast, not gather: the pair pass stays one fused elementwise + reduce
+    return (lambda x: [x[None, :, k] for k in range(3)]), ~jnp.eye(P, dtype=bool)
+  j, valid, _ = NB.candidates(p, _SKIN * 2.0 * lm.radius, lm.pair_candidates)
+  return (lambda x: [x[:, k][j] for k in range(3)]), valid
+
+
+def _pair_geometry(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
+  """(near bool[P, C], dist f32[P, C] m, three f32[P, C] components of the unit vectors partner → particle).
+
+  Coordinates are kept as separate [P, C] planes (partners on the minor axis)
+  so every pair quantity is a contiguous, vectorisable row and the reductions
+  run along it.
+  """
+  diff = [p[:, k : k + 1] - pj[k] for k in range(3)]  # static: x, y, z
+  d2 = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2]
+  skin = _SKIN * 2.0 * lm.radius
+  near = valid & (d2 < skin * skin)
+  inv = jnp.where(near, jax.lax.rsqrt(jnp.maximum(d2, 1e-12)), 0.0)  # one rsqrt: no sqrt + divide
+  return near, d2 * inv, [c * inv for c in diff]
+
+
+def _pair_push(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
+  """Jacobi correction pushing overlapping pairs apart, f32[P, 3] m, and touching partners per particle f32[P, 1].
+
+  The push is capped at r/4 per particle per substep so a dense pile can never
+  shove a particle through a thin wall in one step. Pairs within 2.2 r count as
+  touching (a 10 % skin so resting neighbours count). Elementwise products
+  summed over partners (no einsum): XLA fuses the pass into one loop and never
+  stores a [P, C, 3] pair table.
+  """
+  near, dist, nrm = _pair_geometry(lm, p, pj, valid)
+  overlap = jnp.where(near, jnp.maximum(2.0 * lm.radius - dist, 0.0), 0.0)
+  push = 0.5 * lm.pair_stiffness * jnp.stack([jnp.sum(overlap * c, axis=1) for c in nrm], axis=-1)
   n = jnp.linalg.norm(push, axis=-1, keepdims=True)
-  return push * jnp.minimum(1.0, 0.25 * lm.radius / jnp.maximum(n, 1e-12)), near, nrm
+  count = jnp.maximum(jnp.sum(near, axis=1, keepdims=True), 1).astype(p.dtype)
+  return push * jnp.minimum(1.0, 0.25 * lm.radius / jnp.maximum(n, 1e-12)), count
 
 
-def _pair_damp(near: jax.Array, nrm: jax.Array, v: jax.Array) -> jax.Array:
+def _pair_damp(lm: LiquidModel, p, pj, valid, count, v: jax.Array, vj: list) -> jax.Array:
   """Velocity change removing relative normal motion of touching pairs, f32[P, 3] m/s.
 
   Position pushes turned into velocity (v = Δp/dt) would bounce a settling
   pile upward; damping the pairs' relative normal velocity (a dashpot, averaged
-  over each particle's neighbours so the Jacobi update never overshoots) only
-  removes energy, which is what lets a glass of liquid come to rest.
+  over each particle's ``count`` touching partners so the Jacobi update never
+  overshoots) only removes energy, which is what lets a glass of liquid come to
+  rest. The pair normals are recomputed from ``p`` (the predicted positions the
+  push used): cheaper on a GPU than keeping [P, C, 3] normals alive across the
+  geom passes.
   """
-  vn = jnp.einsum("ik,ijk->ij", v, nrm) - jnp.einsum("jk,ijk->ij", v, nrm)  # [P, P], > 0 separating
-  count = jnp.maximum(jnp.sum(near, axis=1, keepdims=True), 1).astype(v.dtype)
-  return -0.5 * jnp.einsum("ij,ijk->ik", vn, nrm) / count
+  _, _, nrm = _pair_geometry(lm, p, pj, valid)
+  vn = sum((v[:, k : k + 1] - vj[k]) * nrm[k] for k in range(3))  # [P, C], > 0 separating
+  return -0.5 * jnp.stack([jnp.sum(vn * c, axis=1) for c in nrm], axis=-1) / count
 
 
 def _surface_velocity(lm: LiquidModel, d, col: jax.Array, p: jax.Array) -> jax.Array:
@@ -310,23 +360,26 @@ def advance(m, binding, d, ds, dt):
   p = p0 + v * dt
   pairs = lm.pair_stiffness > 0 and lm.num_particles > 1
   if pairs:
-    push, near, nrm = _pairs(lm, p)
+    take, valid = _partners(lm, p)
+    p_pair = p
+    push, count = _pair_push(lm, p_pair, take(p_pair), valid)
     p = p + push
   ncol = lm.column_geom.size
   if ncol:
     for _ in range(lm.iterations):  # static: a few projection passes
-      phi, n, _ = G.points_to_geoms(lm.groups, d, m, p)
+      phi, n = G.points_to_geoms_planes(lm.groups, d, m, p)  # [P, G], normals as x, y, z planes
       pen = jnp.maximum(r - phi, 0.0)  # [P, G] depth of the particle's sphere in each geom
-      p = p + jnp.sum(pen[..., None] * n, axis=1)
+      p = p + jnp.stack([jnp.sum(pen * c, axis=1) for c in n], axis=-1)
     phi = phi + pen  # after the last push (exact for the geom pushed along its own normal)
   v = (p - p0) / dt
   if pairs:
-    v = v + _pair_damp(near, nrm, v)
+    v = v + _pair_damp(lm, p_pair, take(p_pair), valid, count, v, take(v))
   if ncol:
     # friction and no approach against the closest geom, in that geom's moving frame
     j = jnp.argmin(phi, axis=1)  # [P]
-    gap = jnp.take_along_axis(phi, j[:, None], 1)[:, 0] - r
-    nj = jnp.take_along_axis(n, j[:, None, None], 1)[:, 0]  # [P, 3]
+    closest = j[:, None] == jnp.arange(ncol)[None, :]  # [P, G] one-hot: a select, not a gather
+    gap = jnp.min(phi, axis=1) - r
+    nj = jnp.stack([jnp.sum(jnp.where(closest, c, 0.0), axis=1) for c in n], axis=-1)  # [P, 3]
     vg = _surface_velocity(lm, d, j, p)
     rel = v - vg
     vn = jnp.sum(rel * nj, axis=-1, keepdims=True)
@@ -335,11 +388,10 @@ def advance(m, binding, d, ds, dt):
     rel_c = jnp.maximum(vn, 0.0) * nj + (1.0 - lm.friction) * vt
     v = jnp.where(in_contact, vg + rel_c, v)
     wet = (phi - r) < lm.contact_distance  # [P, G]
-    link = jnp.asarray(lm.column_link)
-    L = binding.num_links
-    # a particle touching several geoms of one link counts once
-    per_link = jnp.zeros((p.shape[0], L + 1), bool).at[:, jnp.where(link >= 0, link, L)].max(wet)
-    exposure = jnp.sum(per_link[:, :L], axis=0).astype(jnp.float32)
+    # a particle touching several geoms of one link counts once: any over the link's columns
+    # (a static column → link mask, an elementwise reduce rather than a scatter)
+    per_link = jnp.any(wet[:, :, None] & lm.column_link_mask[None], axis=1)  # [P, L]
+    exposure = jnp.sum(per_link, axis=0).astype(jnp.float32)
   else:
     exposure = jnp.zeros_like(ds.exposure)
   speed = jnp.linalg.norm(v, axis=-1, keepdims=True)

@@ -1,0 +1,270 @@
+"""Whole task step vs raw physics: where a registered task's env step spends its time.
+
+For each task (``tasks.make(name)``, the damage wrapper included) and one batch
+size, every variant is one ``jit`` of a ``lax.scan`` over ``--steps`` control
+steps of ``vmap(step)``, compiled ahead of time and timed after one warm-up call
+(best of ``--repeats``). Variants:
+
+* ``task``          — policy + ``env.step`` (what training runs);
+* ``zeros_policy``  — ``env.step`` with zero actions (the policy's cost is the difference);
+* ``no_wrapper``    — the bare task's step (``env.unwrapped``) with the policy: the damage
+                      wrapper's bookkeeping (health summaries, episode stats, reset masks);
+* ``no_liquid``     — the task step with the liquid model not advanced (tasks with liquid);
+* ``no_pairs``      — liquid advanced without particle–particle pairs (tasks with liquid);
+* ``no_temperature``— the task step with the temperature model not advanced (tasks with heat);
+* ``no_damage``     — the task step with the substeps as plain ``mjx.step`` (no damage
+                      signals, temperature or liquid): policy, observation, reward, wrapper;
+* ``raw``           — ``n_substeps × mjx.step`` of the same model and batch (no policy, no task),
+                      controls held at their reset values;
+* ``raw_moving``    — the same with the controls the task's ``robot.ctrl`` makes of uniform
+                      random actions each step: MJX's solver stops early once every env has
+                      converged, so a moving robot can cost more physics than one at rest.
+
+The ``ratio`` column is env-steps/s of the variant over ``raw``; ``share of task
+step`` is the time the variant removes, 1 − t_variant / t_task. The policy
+(``--policy``) is an untrained Brax PPO MLP (``mlp``: 256 × 256 swish, tanh-normal
+sampling, as ``train/``), ``zeros`` or the task's scripted ``safe`` policy.
+
+    python benchmarks/step_overhead.py --envs 32768                      # GPU, all variants
+    python benchmarks/step_overhead.py --envs 64 --steps 10 --variants task,raw   # CPU smoke
+
+Writes ``benchmarks/results/step_overhead_<device>.{json,md}`` (``--out-dir``) with the command.
+A run merges into an existing file of the same device, batch size, steps, policy and
+clock: the (task, variant) rows it measured are replaced and the others kept (so one
+long measurement can be split into several commands, e.g. under a per-command time
+limit); the
+``commands`` list records every command that contributed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import json
+import os
+import platform
+import shlex
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))  # the repo's packages, wherever this is run from
+
+VARIANTS = ("task", "zeros_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage", "raw",
+            "raw_moving")
+POLICIES = ("mlp", "zeros", "scripted")
+
+
+def make_policy(env, kind: str):
+  """``policy(state, rng) -> action f32[A]`` for one env."""
+  import jax
+  import jax.numpy as jnp
+
+  if kind == "zeros":
+    return lambda s, k: jnp.zeros((env.action_size,), jnp.float32)
+  if kind == "scripted":
+    import tasks
+
+    return tasks.scripted_policy(env, "safe")
+  from brax.training.agents.ppo import networks as ppo_networks
+
+  nets = ppo_networks.make_ppo_networks(env.observation_size, env.action_size,
+                                        policy_hidden_layer_sizes=(256, 256), value_hidden_layer_sizes=(256, 256))
+  params = nets.policy_network.init(jax.random.PRNGKey(0))
+  infer = ppo_networks.make_inference_fn(nets)((None, params), deterministic=False)
+  return lambda s, k: infer(s.obs, k)[0]
+
+
+def _physics_override(task, variant: str):
+  """The task's ``physics_step`` for a variant that switches a model off, or None."""
+  from mjx_damage import physics
+
+  b, sys_, n = task.damage_binding, task.sys, task.n_substeps
+  if variant == "no_damage":
+    return lambda d, ds, ctrl: (physics.step_without_damage(sys_, d.replace(ctrl=ctrl), n), ds)
+  if variant == "no_liquid":
+    b = dataclasses.replace(b, liquid=None)  # state kept, never advanced
+  elif variant == "no_pairs":
+    b = dataclasses.replace(b, liquid=b.liquid.replace(pair_stiffness=0.0))
+  elif variant == "no_temperature":
+    b = dataclasses.replace(b, thermal=None)
+  else:
+    return None
+  return lambda d, ds, ctrl: physics.step(sys_, b, d.replace(ctrl=ctrl), ds, n)
+
+
+def applicable(task, variant: str) -> bool:
+  b = task.damage_binding
+  if variant in ("no_liquid", "no_pairs"):
+    return b.liquid is not None and (variant == "no_liquid" or b.liquid.pair_stiffness > 0)
+  if variant == "no_temperature":
+    return b.thermal is not None
+  return True
+
+
+def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy_kind: str, clock=time.perf_counter) -> dict:
+  import jax
+  import jax.numpy as jnp
+
+  import tasks
+  from mjx_damage import physics
+
+  env = tasks.make(name)
+  task = env.unwrapped
+  override = _physics_override(task, variant)
+  if override is not None:
+    task.physics_step = override  # instance attribute: this env object only
+  policy = make_policy(env, "zeros" if variant == "zeros_policy" else policy_kind)
+  stepper = task if variant == "no_wrapper" else env
+  keys = jax.random.split(jax.random.PRNGKey(0), envs)
+  state = jax.jit(jax.vmap(stepper.reset))(keys)
+
+  if variant in ("raw", "raw_moving"):
+    n, moving = task.n_substeps, variant == "raw_moving"
+
+    def one(d, k):
+      if moving:
+        a = jax.random.uniform(k, (env.action_size,), minval=-1.0, maxval=1.0)
+        d = d.replace(ctrl=task.robot.ctrl(d, a, task.ws_lo, task.ws_hi))
+      return physics.step_without_damage(task.sys, d, n)
+
+    def run(carry):
+      def body(c, _):
+        d, k = c
+        k, kp = jax.random.split(k)
+        return (jax.vmap(one)(d, jax.random.split(kp, envs)), k), None
+      return jax.lax.scan(body, carry, None, length=steps)[0]
+
+    carry = (state.pipeline_state, jax.random.PRNGKey(1))
+  else:
+    def run(carry):
+      def body(c, _):
+        s, k = c
+        k, kp = jax.random.split(k)
+        a = jax.vmap(policy)(s, jax.random.split(kp, envs))
+        return (jax.vmap(stepper.step)(s, a), k), None
+      return jax.lax.scan(body, carry, None, length=steps)[0]
+
+    carry = (state, jax.random.PRNGKey(1))
+  t0 = time.perf_counter()
+  compiled = jax.jit(run, donate_argnums=0).lower(carry).compile()
+  compile_s = time.perf_counter() - t0
+  carry = jax.block_until_ready(compiled(carry))  # warm-up
+  best = float("inf")
+  for _ in range(repeats):
+    t0 = clock()
+    carry = jax.block_until_ready(compiled(carry))
+    best = min(best, clock() - t0)
+  d = carry[0] if variant.startswith("raw") else carry[0].pipeline_state
+  row = {
+      "task": name, "variant": variant, "envs": envs, "steps": steps,
+      "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s,
+      "finite": bool(jnp.all(jnp.isfinite(d.qpos))),
+  }
+  print(f"{name:12s} {variant:15s} {row['env_steps_per_s']:>12,.0f} env-steps/s  (compile {compile_s:.0f} s)", flush=True)
+  return row
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+  """Adds ``ratio_to_raw`` and ``share_of_task_step`` to each row (per task)."""
+  rows = sorted(rows, key=lambda r: (r["task"], VARIANTS.index(r["variant"])))
+  by = {(r["task"], r["variant"]): r for r in rows}
+  for r in rows:
+    raw, task = by.get((r["task"], "raw")), by.get((r["task"], "task"))
+    r["ratio_to_raw"] = r["env_steps_per_s"] / raw["env_steps_per_s"] if raw else None
+    r["share_of_task_step"] = 1.0 - r["wall_s"] / task["wall_s"] if task and r["variant"] != "task" else None
+  return rows
+
+
+def markdown(record: dict) -> str:
+  lines = [
+      *(f"Command: `{c}`  " for c in record["commands"]),
+      f"Device: {record['device']} · {record['envs']} envs · {record['steps']} control steps per timed call · "
+      f"policy {record['policy']} · {record['clock']} clock · {record['timestamp_utc']}",
+      "",
+      "ratio = env-steps/s over `raw` (n_substeps × mjx.step, same model and batch); share = time the variant "
+      "removes from the task step (1 − t_variant / t_task).",
+      "",
+      "| task | variant | env-steps/s | ratio to raw | share of task step | compile s |",
+      "|---|---|---:|---:|---:|---:|",
+  ]
+  for r in record["results"]:
+    ratio = "" if r["ratio_to_raw"] is None else f"{r['ratio_to_raw']:.3f}"
+    share = "" if r["share_of_task_step"] is None else f"{100 * r['share_of_task_step']:.1f} %"
+    lines.append(f"| {r['task']} | {r['variant']} | {r['env_steps_per_s']:,.0f} | {ratio} | {share} | {r['compile_s']:.0f} |")
+  return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+  p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+  p.add_argument("--tasks", default="place_plate,shelve_item,pour_water")
+  p.add_argument("--envs", type=int, default=1024)
+  p.add_argument("--steps", type=int, default=20, help="control steps per timed call")
+  p.add_argument("--repeats", type=int, default=2, help="timed calls per variant (best kept)")
+  p.add_argument("--variants", default=",".join(VARIANTS), help=f"comma list of {', '.join(VARIANTS)}")
+  p.add_argument("--policy", default="mlp", choices=POLICIES)
+  p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                 help="cpu: process CPU seconds (all threads) — steadier than wall time on a shared, loaded CPU; "
+                      "use wall on a GPU")
+  p.add_argument("--out-dir", default=os.path.join(HERE, "results"))
+  a = p.parse_args(argv)
+  for k in ("envs", "steps", "repeats"):
+    if getattr(a, k) < 1:
+      p.error(f"--{k}: must be >= 1")
+  variants = a.variants.split(",")
+  for v in variants:
+    if v not in VARIANTS:
+      p.error(f"--variants: unknown {v!r}; valid: {', '.join(VARIANTS)}")
+  import tasks
+
+  names = a.tasks.split(",")
+  for n in names:
+    if n not in tasks.names():
+      p.error(f"--tasks: unknown {n!r}; valid: {', '.join(tasks.names())}")
+  os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(HERE, "..", ".jax_cache"))
+  import jax
+
+  from mjx_damage import io
+
+  rows = []
+  for n in names:
+    probe = tasks.make(n).unwrapped
+    for v in variants:
+      if applicable(probe, v):
+        rows.append(measure(n, v, a.envs, a.steps, a.repeats, a.policy,
+                            time.perf_counter if a.clock == "wall" else time.process_time))
+  device = jax.devices()[0]
+  record = {
+      "benchmark": "step_overhead",
+      "command": " ".join(shlex.quote(x) for x in [sys.executable, *(sys.argv if argv is None else ["benchmarks/step_overhead.py", *argv])]),
+      "timestamp_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ"),
+      "device": f"{device.platform}:{device.device_kind}",
+      "host": platform.node(),
+      "cpu_count": os.cpu_count(),
+      "jax": jax.__version__,
+      "envs": a.envs,
+      "steps": a.steps,
+      "repeats": a.repeats,
+      "policy": a.policy,
+      "clock": a.clock,
+      "results": summarise(rows),
+  }
+  stem = os.path.join(a.out_dir, f"step_overhead_{device.platform}")
+  record["commands"] = [record["command"]]
+  if os.path.exists(stem + ".json"):
+    with open(stem + ".json") as f:
+      old = json.load(f)
+    if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy", "clock")):
+      new = {(r["task"], r["variant"]) for r in rows}
+      kept = [r for r in old["results"] if (r["task"], r["variant"]) not in new]
+      record["results"] = summarise(kept + rows)
+      record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
+  io.write_json(stem + ".json", record)
+  io.write_text(stem + ".md", markdown(record))
+  print(f"wrote {stem}.json, {stem}.md")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
