@@ -25,7 +25,7 @@ step). Counted over all (env, step) pairs:
 Usage::
 
     .venv/bin/python benchmarks/soak.py                           # GPU: 1e6 steps per task
-    nice -n 10 .venv/bin/python benchmarks/soak.py                # CPU: 8 envs × 2500 steps per task
+    nice -n 10 .venv/bin/python benchmarks/soak.py                # CPU: 8 envs × 400 steps per task
 
 Writes ``benchmarks/results/soak_<platform>.{json,md}`` (``--out``: another
 JSON path, the .md beside it); exits 1 when any counter above is non-zero.
@@ -73,15 +73,17 @@ def liquid_floor(env) -> float:
   return float(min(d.geom_xpos[g][2] for g in planes)) - 2.0 * lm.radius
 
 
-def build(env, envs: int, chunk: int, extreme_frac: float):
+def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int | None = None):
   """``(reset(key) -> carry, run(carry) -> carry)``: one compiled chunk of ``chunk`` steps of ``envs`` envs.
 
-  The carry holds the batched state, the previous step's link health f32[E, L]
+  ``env``: a damage-wrapped env (:func:`tasks.make`); ``episode_length``
+  (default: the task's) is where Brax's EpisodeWrapper truncates. The carry holds the batched state, the previous step's link health f32[E, L]
   and done f32[E], a key, and the int32 counters of the module docstring (plus
   ``steps``, ``episodes``, ``extreme_injected``, ``action_sanitised``).
   """
   task = env.unwrapped
-  stack = bw.AutoResetWrapper(bw.VmapWrapper(bw.EpisodeWrapper(env, task.episode_length, action_repeat=1)))
+  episode_length = task.episode_length if episode_length is None else episode_length
+  stack = bw.AutoResetWrapper(bw.VmapWrapper(bw.EpisodeWrapper(env, episode_length, action_repeat=1)))
   lm = task.damage_binding.liquid
   n_particles = 0 if lm is None else lm.num_particles
   floor = liquid_floor(env) if lm is not None else 0.0
@@ -196,8 +198,8 @@ def main(argv=None) -> int:
   p.add_argument("--tasks", default=",".join(tasks.names()), help="comma-separated task names")
   p.add_argument("--envs", type=int, default=512 if gpu else 8, help="environments per task")
   p.add_argument("--steps", type=int, default=None,
-                 help="env steps per task, all envs together (default 1e6 on GPU, 20000 on CPU)")
-  p.add_argument("--chunk", type=int, default=None, help="steps per compiled scan (default 250)")
+                 help="env steps per task, all envs together (default 1e6 on GPU, 3200 on CPU)")
+  p.add_argument("--chunk", type=int, default=None, help="steps per compiled scan (default 250 GPU, 200 CPU)")
   p.add_argument("--extreme-frac", type=float, default=0.05, help="share of action entries made extreme")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/soak_<platform>.json)")
@@ -206,8 +208,8 @@ def main(argv=None) -> int:
   for t in names:
     if t not in tasks.names():
       p.error(f"--tasks: unknown task {t!r}; valid: {', '.join(tasks.names())}")
-  steps = args.steps if args.steps is not None else (1_000_000 if gpu else 20_000)
-  chunk = args.chunk if args.chunk is not None else 250
+  steps = args.steps if args.steps is not None else (1_000_000 if gpu else 3200)
+  chunk = args.chunk if args.chunk is not None else (250 if gpu else 200)
   for flag, v in (("--envs", args.envs), ("--steps", steps), ("--chunk", chunk)):
     if v < 1:
       p.error(f"{flag}: must be >= 1, got {v}")
