@@ -11,7 +11,8 @@
 * ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7) plus
   ``action_sanitised``, the episode's count of sanitised action entries,
 
-and ``metrics["action_sanitised"]`` f32[] (action entries sanitised this step), and shapes ``reward ← reward − weight·cost``, optionally appends entity health
+and ``metrics["action_sanitised"]`` f32[] (action entries sanitised this step);
+it shapes ``reward ← reward − weight·cost``, optionally appends entity health
 / 100 to the observation and ends the episode when an entity's health reaches 0.
 
 Two modes:

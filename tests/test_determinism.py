@@ -16,11 +16,12 @@ Findings (XLA:CPU, jaxlib 0.10.2; ``benchmarks``-free, rerun with ``-m slow``):
   XLA:CPU code generation, not the model: the compiler specialises each
   executable to its shapes, and a batch of 1 is a degenerate dimension that it
   removes, so a reduction (``jnp.sum`` over a link's contacts, the solver's
-  dot products) or a LAPACK call can run with another loop order/vectorisation
-  and sum in another order. A pure-JAX check shows it without MuJoCo:
-  ``jax.vmap(lambda a: jnp.sum(a * a))`` over ``f32[B, 37, 37]`` and the
-  Cholesky of a 37×37 matrix differ in the last bits between B = 1 and B = 32
-  (B = 2 differs for the sum too; B ≥ 3 agree there). MJX's contact solver
+  dot products) can run with another loop order/vectorisation and sum in
+  another order. A pure-JAX check shows it without MuJoCo
+  (``test_cause_xla_cpu_sums_depend_on_batch_shape``): over ``f32[B, 37, 37]``,
+  ``vmap`` of ``jnp.sum(a * a)``, of row sums and of ``a @ aᵀ`` differ in the
+  last bits between B = 1 and B = 32 (the sums also at B = 2; B ≥ 3 agree;
+  a batched Cholesky agrees at every B). MJX's contact solver
   then amplifies the last-bit difference over the steps. The slow test
   asserts the tightest tolerance that holds over 20 steps (``TOL_B1``).
   Nothing guarantees bitwise equality across other batch sizes either: it
@@ -128,3 +129,22 @@ def test_batch_size_and_chunking_independence(name):
     for k, tol in TOL_B1.items():
       err = float(np.max(np.abs(np.asarray(alone[k]) - np.asarray(want[k]))))
       assert err <= tol, f"{name} env {i} alone vs in a batch of 8: max |Δ{k}| = {err:.3g} > {tol}"
+
+
+@pytest.mark.slow
+def test_cause_xla_cpu_sums_depend_on_batch_shape():
+  """The cause of the batch-1 difference, without MuJoCo: XLA:CPU sums in a shape-dependent order."""
+  a = jax.random.normal(jax.random.PRNGKey(0), (32, 37, 37))
+  spd = jax.vmap(lambda x: x @ x.T + 37 * jnp.eye(37))(a)
+  ops = {"sum": (lambda x: jnp.sum(x * x), a), "rowsum": (lambda x: jnp.sum(x, axis=1), a),
+         "gram": (lambda x: x @ x.T, a), "cholesky": (jnp.linalg.cholesky, spd)}
+  same = {}
+  for name, (f, x) in ops.items():
+    g = jax.jit(jax.vmap(f))
+    ref = np.asarray(g(x))
+    for b in (1, 2, 3, 8):
+      got = np.asarray(g(x[:b]))
+      np.testing.assert_allclose(got, ref[:b], rtol=1e-5, atol=1e-5)  # rounding only
+      same[name, b] = got.tobytes() == ref[:b].tobytes()
+  assert not same["sum", 1] and not same["rowsum", 1] and not same["gram", 1]
+  assert all(same[k, b] for k in ops for b in (3, 8)) and all(same["cholesky", b] for b in (1, 2))
