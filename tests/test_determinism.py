@@ -12,7 +12,7 @@ Findings (XLA:CPU, jaxlib 0.10.2; ``benchmarks``-free, rerun with ``-m slow``):
   executable whose step count is an argument), are bitwise identical.
 * Batch sizes 4 and 8 are bitwise identical for every env in the three tasks
   tested (place_plate, turn_on_stove, pour_water).
-* Batch size 1 is NOT bitwise identical to a larger batch. The reason is
+* Batch size 1 is NOT bitwise identical to a batch of 8. The reason is
   XLA:CPU code generation, not the model: the compiler specialises each
   executable to its shapes, and a batch of 1 is a degenerate dimension that it
   removes, so a reduction (``jnp.sum`` over a link's contacts, the solver's
@@ -21,9 +21,17 @@ Findings (XLA:CPU, jaxlib 0.10.2; ``benchmarks``-free, rerun with ``-m slow``):
   (``test_cause_xla_cpu_sums_depend_on_batch_shape``): over ``f32[B, 37, 37]``,
   ``vmap`` of ``jnp.sum(a * a)``, of row sums and of ``a @ aᵀ`` differ in the
   last bits between B = 1 and B = 32 (the sums also at B = 2; B ≥ 3 agree;
-  a batched Cholesky agrees at every B). MJX's contact solver
-  then amplifies the last-bit difference over the steps. The slow test
-  asserts the tightest tolerance that holds over 20 steps (``TOL_B1``).
+  a batched Cholesky agrees at every B). The dynamics then amplify it.
+  Measured after 20 steps, env 0 and env 5 alone vs in the batch of 8:
+  place_plate max |Δqpos| 4e-9, |Δqvel| 6e-7, |Δobs| 6e-8, reward and health
+  equal; turn_on_stove: the compared fields equal; pour_water: |Δqpos| 6e-8,
+  |Δqvel| 4e-6, but the liquid is chaotic (pairwise particle contacts): one
+  particle ends on the other side of a cavity wall, so the in-glass/in-cup
+  fractions in obs differ by 1/128, the reward by 2/128, and the laptop's
+  fluid damage — a threshold on the count of touching particles — differs by
+  up to 7.2 health points. ``TOL_B1`` asserts about 10× the measured physics
+  differences; for pour_water it bounds obs/reward by a few particles and does
+  not bound health (a count crossing a threshold has no float tolerance).
   Nothing guarantees bitwise equality across other batch sizes either: it
   holds for the sizes tested here, which is what the tests pin down.
 """
@@ -37,8 +45,13 @@ import tasks
 
 STEPS = 20
 KEYS = jax.random.split(jax.random.PRNGKey(7), 8)
-# max |B=1 − B=8| over 20 steps, per compared field (see the module docstring): a few times what was measured
-TOL_B1 = {"obs": 1e-4, "reward": 1e-4, "link_health": 1e-3, "qpos": 1e-5, "qvel": 1e-3}
+# bound on max |B=1 − B=8| after 20 steps, per task and compared field (see the module docstring)
+_SOLID = {"obs": 1e-6, "reward": 1e-6, "link_health": 1e-4, "qpos": 1e-7, "qvel": 1e-5}
+TOL_B1 = {
+    "place_plate": _SOLID,
+    "turn_on_stove": _SOLID,
+    "pour_water": {"obs": 3 / 128, "reward": 6 / 128, "qpos": 1e-6, "qvel": 1e-4},
+}
 
 
 def rollout_fns(env):
@@ -126,7 +139,7 @@ def test_batch_size_and_chunking_independence(name):
   for i in (0, 5):
     alone = compared(run(fns, KEYS[i : i + 1]))
     want = compared(take(ref, slice(i, i + 1)))
-    for k, tol in TOL_B1.items():
+    for k, tol in TOL_B1[name].items():
       err = float(np.max(np.abs(np.asarray(alone[k]) - np.asarray(want[k]))))
       assert err <= tol, f"{name} env {i} alone vs in a batch of 8: max |Δ{k}| = {err:.3g} > {tol}"
 
