@@ -8,9 +8,11 @@
   a CMDP budget keeps seeing continued abuse of a destroyed object,
 * ``damage`` — {"mechanical", "thermal", "fluid"} totals this step, f32[] each,
 * ``task_reward`` f32[] — the wrapped env's reward before shaping,
-* ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7),
+* ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7) plus
+  ``action_sanitised``, the episode's count of sanitised action entries,
 
-and shapes ``reward ← reward − weight·cost``, optionally appends entity health
+and ``metrics["action_sanitised"]`` f32[] (action entries sanitised this step);
+it shapes ``reward ← reward − weight·cost``, optionally appends entity health
 / 100 to the observation and ends the episode when an entity's health reaches 0.
 
 Two modes:
@@ -25,6 +27,13 @@ Two modes:
   contacts, with each link's acceleration taken as the change of its COM
   velocity over the step divided by ``env.dt``. Short impacts between env steps
   can be missed or blurred: prefer the per-substep mode where you can.
+
+Actions are sanitised before they reach the env (:func:`sanitise_action`): a
+NaN entry becomes 0, ±inf and any finite entry outside ``action_bounds``
+(default [−1, 1], Brax's convention and every task's) are clipped to the
+nearest bound. A policy that diverges, or a user who passes 1e3, then moves
+the robot as hard as a valid action can, and no NaN reaches the physics.
+Valid actions pass through bitwise unchanged.
 
 Episodes are recognised by simulation time (``pipeline_state.time`` returning
 to its reset value), so health is restored to 100 under Brax's own
@@ -48,10 +57,29 @@ from mjx_damage.signals import LinkSignals
 
 ParamsFn = Callable[[jax.Array, DamageParams], DamageParams]
 
+ACTION_BOUNDS = (-1.0, 1.0)
+
+
+def sanitise_action(action: jax.Array, lo: float = -1.0, hi: float = 1.0) -> tuple[jax.Array, jax.Array]:
+  """Make an action safe to apply: NaN → 0, then everything clipped to [lo, hi].
+
+  Args:
+    action: f32[..., A] (one env or a batch).
+    lo, hi: finite bounds, lo < hi (a NaN entry maps to 0 clipped into them).
+
+  Returns:
+    (action f32[..., A] finite and in [lo, hi], identical to the input where it
+    already was; count f32[...] of entries that were NaN, ±inf or out of range).
+  """
+  a = jnp.asarray(action)
+  bad = ~((a >= lo) & (a <= hi))  # NaN compares False: counted
+  clean = jnp.clip(jnp.where(jnp.isnan(a), jnp.zeros_like(a), a), lo, hi)
+  return clean, jnp.sum(bad, axis=-1).astype(jnp.float32)
+
 
 def _zero_episode():
   z = jnp.zeros((), jnp.float32)
-  return {"completed": z, "cost": z, "length": z, "damaged": z}
+  return {"completed": z, "cost": z, "length": z, "damaged": z, "action_sanitised": z}
 
 
 class DamageWrapper(Wrapper):
@@ -68,6 +96,8 @@ class DamageWrapper(Wrapper):
     params_fn: ``(rng, default_params) -> params`` drawn at every reset
       (fragility randomisation); default: the binding's parameters.
     safe_threshold: entity health above which an episode counts as safe.
+    action_bounds: (lo, hi) finite, lo < hi: the env's action range; actions
+      are sanitised into it (:func:`sanitise_action`).
   """
 
   def __init__(
@@ -81,8 +111,14 @@ class DamageWrapper(Wrapper):
       health_in_obs: bool = False,
       params_fn: Optional[ParamsFn] = None,
       safe_threshold: float = 95.0,
+      action_bounds: tuple[float, float] = ACTION_BOUNDS,
   ):
     super().__init__(env)
+    if (not isinstance(action_bounds, (tuple, list)) or len(action_bounds) != 2
+        or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) < float("inf")
+               for v in action_bounds)
+        or not action_bounds[0] < action_bounds[1]):
+      raise ValueError(f"action_bounds: must be two finite numbers (lo, hi) with lo < hi, got {action_bounds!r}")
     for name, v in (("weight", weight), ("safe_threshold", safe_threshold)):
       if isinstance(v, bool) or not isinstance(v, (int, float)) or not v == v or v < 0:
         raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
@@ -106,6 +142,7 @@ class DamageWrapper(Wrapper):
     self.health_in_obs = bool(health_in_obs)
     self.params_fn = params_fn
     self.safe_threshold = float(safe_threshold)
+    self.action_bounds = (float(action_bounds[0]), float(action_bounds[1]))
 
   # -- Brax API -------------------------------------------------------------
   @property
@@ -139,6 +176,7 @@ class DamageWrapper(Wrapper):
     info["damage_episode"] = _zero_episode()
     metrics = dict(state.metrics)
     metrics.update(self._metrics(info))
+    metrics["action_sanitised"] = jnp.zeros((), jnp.float32)
     return state.replace(obs=self._obs(state.obs, info), info=info, metrics=metrics)
 
   def step(self, state: State, action: jax.Array) -> State:
@@ -151,6 +189,7 @@ class DamageWrapper(Wrapper):
     )
     episode = jax.tree.map(lambda x: jnp.where(fresh, 0.0, x), info["damage_episode"])
     inner = state.replace(obs=self._strip_obs(state.obs), info=info)
+    action, sanitised = sanitise_action(action, *self.action_bounds)
     if self.per_substep:
       nstate = self.env.step(inner, action)
       ds = nstate.info["damage_state"]
@@ -169,6 +208,7 @@ class DamageWrapper(Wrapper):
         "cost": episode["cost"] + cost,
         "length": episode["length"] + 1.0,
         "damaged": jnp.maximum(episode["damaged"], (cost > 0).astype(jnp.float32)),
+        "action_sanitised": episode["action_sanitised"] + sanitised,
     }
     reward = nstate.reward - self.weight * cost
     done = nstate.done
@@ -177,6 +217,7 @@ class DamageWrapper(Wrapper):
       done = jnp.maximum(done, destroyed.astype(done.dtype))
     metrics = dict(nstate.metrics)
     metrics.update(self._metrics(info))
+    metrics["action_sanitised"] = sanitised
     return nstate.replace(obs=self._obs(nstate.obs, info), reward=reward, done=done, info=info, metrics=metrics)
 
   # -- helpers --------------------------------------------------------------

@@ -135,3 +135,77 @@ def test_native_and_mjx_extract_the_same_signals():
   np.testing.assert_allclose(_per_link(f_n, l_n, 2), _per_link(f_x, l_x, 2), rtol=0.05, atol=0.05)
   np.testing.assert_allclose(a_n, a_x, rtol=0.05, atol=0.05)
   assert np.abs(_per_link(f_n, l_n, 2)[:, 2]).min() > 1.0  # both links really are loaded
+
+
+# -- action sanitisation ---------------------------------------------------------------------------
+def test_sanitise_action_rule():
+  a = jnp.array([[0.25, -1.0, 1.0, -0.0, jnp.nan, jnp.inf, -jnp.inf, 1e3, -1e3, 1.0000001]], jnp.float32)
+  clean, n = md.wrapper.sanitise_action(a)
+  np.testing.assert_array_equal(clean[0], [0.25, -1.0, 1.0, 0.0, 0.0, 1.0, -1.0, 1.0, -1.0, 1.0])
+  assert clean.shape == a.shape and n.shape == (1,) and float(n[0]) == 6.0
+  # valid entries pass through bitwise (the sign of -0.0 included)
+  np.testing.assert_array_equal(np.asarray(clean[0, :4]).view(np.uint32), np.asarray(a[0, :4]).view(np.uint32))
+  clean, n = md.wrapper.sanitise_action(jnp.array([jnp.nan, 5.0, -5.0]), lo=0.5, hi=2.0)
+  np.testing.assert_array_equal(clean, [0.5, 2.0, 0.5])  # NaN → 0, then clipped into the bounds
+  assert float(n) == 3.0
+
+
+class PushedDrop(md.demo.DropEnv):
+  """DropEnv whose 3-D action is added to the plate's linear velocity (m/s): a NaN action
+  reaching the physics would turn the whole state NaN. Records the action it was given."""
+
+  @property
+  def action_size(self):
+    return 3
+
+  def reset(self, rng):
+    s = super().reset(rng)
+    return s.replace(info=dict(s.info, seen_action=jnp.zeros(3)))
+
+  def step(self, state, action):
+    v = self.mj_model.jnt_dofadr[self.mj_model.joint("plate").id]
+    d = state.pipeline_state
+    d = d.replace(qvel=d.qvel.at[v : v + 3].add(action))
+    s = super().step(state.replace(pipeline_state=d), action)
+    return s.replace(info=dict(s.info, seen_action=action))
+
+
+@pytest.fixture(scope="module")
+def pushed_stack():
+  """PushedDrop under DamageWrapper under Brax's Episode/Vmap/AutoReset wrappers, 4 envs."""
+  env = md.DamageWrapper(PushedDrop(min_height=0.1, max_height=0.3))
+  wrapped = bw.wrap(env, episode_length=5, action_repeat=1)
+  return env, jax.jit(wrapped.reset), jax.jit(wrapped.step)
+
+
+def test_extreme_actions_are_sanitised_and_counted(pushed_stack):
+  env, reset, step = pushed_stack
+  bad = jnp.array([[jnp.nan, 0.5, 0.0], [jnp.inf, -jnp.inf, 1e3], [-1e3, 0.1, jnp.nan], [0.2, -0.3, 0.9]])
+  s = reset(jax.random.split(jax.random.PRNGKey(0), 4))
+  assert s.metrics["action_sanitised"].shape == (4,) and not s.metrics["action_sanitised"].any()
+  for t in range(5):  # one whole episode of extreme actions
+    s = step(s, bad)
+    np.testing.assert_array_equal(s.info["seen_action"], np.float32([[0, 0.5, 0], [1, -1, 1], [-1, 0.1, 0], [0.2, -0.3, 0.9]]))
+    np.testing.assert_array_equal(s.metrics["action_sanitised"], [1, 3, 2, 0])
+    np.testing.assert_array_equal(s.info["damage_episode"]["action_sanitised"], [(t + 1) * k for k in (1, 3, 2, 0)])
+    assert np.isfinite(np.asarray(s.pipeline_state.qvel)).all() and np.isfinite(np.asarray(s.obs)).all()
+  np.testing.assert_array_equal(s.info["episode_metrics"]["action_sanitised"], [5, 15, 10, 0])  # Brax's sums
+  s = step(s, jnp.zeros((4, 3)))  # first step of the auto-reset episode: the episode count restarts
+  np.testing.assert_array_equal(s.info["damage_episode"]["action_sanitised"], 0.0)
+  # the same NaN given to the bare env reaches its physics: what the wrapper prevents
+  raw = jax.jit(env.env.step)(jax.jit(env.env.reset)(jax.random.PRNGKey(0)), bad[0])
+  assert np.isnan(np.asarray(raw.pipeline_state.qvel)).any()
+
+
+def test_valid_actions_reach_the_env_bitwise(pushed_stack):
+  _, reset, step = pushed_stack
+  a = jax.random.uniform(jax.random.PRNGKey(3), (4, 3), minval=-1.0, maxval=1.0).at[0, 0].set(-0.0)
+  s = step(reset(jax.random.split(jax.random.PRNGKey(1), 4)), a)
+  np.testing.assert_array_equal(np.asarray(s.info["seen_action"]).view(np.uint32), np.asarray(a).view(np.uint32))
+  assert not s.metrics["action_sanitised"].any()
+
+
+def test_wrapper_rejects_bad_action_bounds():
+  for bounds in ((1.0, -1.0), (0.0, 0.0), (-1.0, float("inf")), (float("nan"), 1.0), (-1.0,), "ab", (True, 2.0)):
+    with pytest.raises(ValueError, match="action_bounds: must be two finite numbers"):
+      md.DamageWrapper(DropEnv(), action_bounds=bounds)

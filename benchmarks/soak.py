@@ -1,0 +1,244 @@
+"""Soak: random (and extreme) actions through every task with auto-reset, every step checked on device.
+
+For each task of ``tasks.names()``: ``--envs`` environments under the training
+stack (``tasks.make(name)`` → Brax's EpisodeWrapper(task episode length) →
+VmapWrapper → AutoResetWrapper) take uniform random actions in [−1, 1], of
+which a share ``--extreme-frac`` of the entries is replaced by one of
+±1e3, NaN, ±inf. Steps run in compiled ``lax.scan`` chunks of ``--chunk``
+steps; every check is a counter in the scan carry (no host round trip per
+step). Counted over all (env, step) pairs:
+
+- ``non_finite``: obs, reward, cost, entity health, qpos, qvel, ctrl or any
+  dynamic part of the damage state (link health, temperatures, loads, heat
+  sources, particles) not all finite;
+- ``health_out_of_range``: some link health outside [0, 100];
+- ``health_increase``: some link health above its value at the previous step
+  of the same episode (DAMAGE_MODEL.md: health never rises within an episode;
+  the first step after an auto-reset starts a new episode and is not compared);
+- ``particle_violations`` (tasks with liquid): the number of live particles —
+  finite position and velocity, not below the lowest collidable plane by more
+  than a diameter — differs from the configured count;
+- ``extreme_injected`` / ``action_sanitised``: extreme entries sent, and those
+  the env reports in ``metrics["action_sanitised"]`` (uniform entries are
+  valid, so they must be equal: ``sanitise_mismatch`` counts steps where not).
+
+Usage::
+
+    .venv/bin/python benchmarks/soak.py                           # GPU: 1e6 steps per task
+    nice -n 10 .venv/bin/python benchmarks/soak.py                # CPU: 8 envs × 400 steps per task
+
+Writes ``benchmarks/results/soak_<platform>.{json,md}`` (``--out``: another
+JSON path, the .md beside it); exits 1 when any counter above is non-zero.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shlex
+import sys
+import time
+
+import mjx_damage  # noqa: F401  (package-wide JAX settings before JAX starts)
+from mjx_damage import io
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from brax.envs.wrappers import training as bw
+
+import tasks
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+EXTREMES = (1e3, -1e3, float("nan"), float("inf"), float("-inf"))
+COUNTERS = ("non_finite", "health_out_of_range", "health_increase", "particle_violations", "sanitise_mismatch")
+
+
+def liquid_floor(env) -> float:
+  """z (m) below which a particle has left the scene: the lowest collidable world plane − 2·radius.
+
+  ``-inf`` when the liquid collides with no plane (only non-finite state counts then).
+  """
+  task = env.unwrapped
+  lm = task.damage_binding.liquid
+  m = task.mj_model
+  d = mujoco.MjData(m)
+  mujoco.mj_kinematics(m, d)
+  planes = [g for g in np.asarray(lm.column_geom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE
+            and m.geom_bodyid[g] == 0 and np.allclose(d.geom_xmat[g].reshape(3, 3)[:, 2], (0, 0, 1))]
+  if not planes:
+    return -float("inf")
+  return float(min(d.geom_xpos[g][2] for g in planes)) - 2.0 * lm.radius
+
+
+def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int | None = None):
+  """``(reset(key) -> carry, run(carry) -> carry)``: one compiled chunk of ``chunk`` steps of ``envs`` envs.
+
+  ``env``: a damage-wrapped env (:func:`tasks.make`); ``episode_length``
+  (default: the task's) is where Brax's EpisodeWrapper truncates. The carry holds the batched state, the previous step's link health f32[E, L]
+  and done f32[E], a key, and the int32 counters of the module docstring (plus
+  ``steps``, ``episodes``, ``extreme_injected``, ``action_sanitised``).
+  """
+  task = env.unwrapped
+  episode_length = task.episode_length if episode_length is None else episode_length
+  stack = bw.AutoResetWrapper(bw.VmapWrapper(bw.EpisodeWrapper(env, episode_length, action_repeat=1)))
+  lm = task.damage_binding.liquid
+  n_particles = 0 if lm is None else lm.num_particles
+  floor = liquid_floor(env) if lm is not None else 0.0
+  A = env.action_size
+  extremes = jnp.asarray(EXTREMES, jnp.float32)
+
+  def reset(key):
+    k0, key = jax.random.split(key)
+    s = stack.reset(jax.random.split(k0, envs))
+    zero = jnp.zeros((), jnp.int32)
+    counts = {k: zero for k in COUNTERS + ("steps", "episodes", "extreme_injected", "action_sanitised")}
+    return s, s.info["link_health"], jnp.zeros((envs,), jnp.float32), key, counts
+
+  def one_step(carry, _):
+    s, prev_h, prev_done, key, c = carry
+    key, ku, ke, kv = jax.random.split(key, 4)
+    a = jax.random.uniform(ku, (envs, A), minval=-1.0, maxval=1.0)
+    extreme = jax.random.uniform(ke, (envs, A)) < extreme_frac
+    a = jnp.where(extreme, extremes[jax.random.randint(kv, (envs, A), 0, len(EXTREMES))], a)
+    s = stack.step(s, a)
+
+    def finite(x):
+      return jnp.all(jnp.isfinite(x.reshape(envs, -1)), axis=1)
+
+    d = s.pipeline_state
+    # the damage state's dynamic parts: health, temperatures, loads, heat sources, particles
+    dyn = jax.tree.leaves(s.info["damage_state"].replace(params=None))
+    ok = (finite(s.obs) & finite(s.reward) & finite(s.info["cost"]) & finite(s.info["entity_health"])
+          & finite(d.qpos) & finite(d.qvel) & finite(d.ctrl))
+    for x in dyn:
+      ok = ok & finite(x)
+    h = s.info["link_health"]
+    out_of_range = jnp.any((h < 0.0) | (h > 100.0), axis=1)
+    rose = jnp.any(h > prev_h, axis=1) & (prev_done == 0)
+    if lm is not None:
+      liq = s.info["damage_state"].liquid
+      live = (jnp.all(jnp.isfinite(liq.pos), -1) & jnp.all(jnp.isfinite(liq.vel), -1) & (liq.pos[..., 2] >= floor))
+      lost = jnp.sum(live, axis=1) != n_particles
+    else:
+      lost = jnp.zeros((envs,), bool)
+    sanitised = s.metrics["action_sanitised"]
+    injected = jnp.sum(extreme, axis=1)
+    n = lambda b: jnp.sum(b.astype(jnp.int32))  # noqa: E731
+    c = {
+        "non_finite": c["non_finite"] + n(~ok),
+        "health_out_of_range": c["health_out_of_range"] + n(out_of_range),
+        "health_increase": c["health_increase"] + n(rose),
+        "particle_violations": c["particle_violations"] + n(lost),
+        "sanitise_mismatch": c["sanitise_mismatch"] + n(sanitised != injected),
+        "steps": c["steps"] + envs,
+        "episodes": c["episodes"] + n(s.done > 0),
+        "extreme_injected": c["extreme_injected"] + jnp.sum(injected),
+        "action_sanitised": c["action_sanitised"] + jnp.sum(sanitised).astype(jnp.int32),
+    }
+    return (s, h, s.done, key, c), None
+
+  def run(carry):
+    carry, _ = jax.lax.scan(one_step, carry, None, length=chunk)
+    return carry
+
+  return jax.jit(reset), jax.jit(run, donate_argnums=0)
+
+
+def soak_task(name: str, envs: int, steps: int, chunk: int, extreme_frac: float, seed: int = 0) -> dict:
+  """Soak one task: ``steps`` env steps per env (rounded up to whole chunks). Counts as plain ints."""
+  env = tasks.make(name)
+  reset, run = build(env, envs, chunk, extreme_frac)
+  t0 = time.perf_counter()
+  carry = reset(jax.random.PRNGKey(seed))
+  carry = run(carry)
+  jax.block_until_ready(carry[-1])
+  first = time.perf_counter() - t0
+  for _ in range(-(-steps // chunk) - 1):
+    carry = run(carry)
+  counts = {k: int(v) for k, v in jax.device_get(carry[-1]).items()}
+  wall = time.perf_counter() - t0
+  lm = env.unwrapped.damage_binding.liquid
+  return {
+      "task": name, **counts,
+      "particles": 0 if lm is None else lm.num_particles,
+      "envs": envs, "steps_per_env": counts["steps"] // envs, "episode_length": env.unwrapped.episode_length,
+      "compile_and_first_chunk_s": round(first, 1), "wall_s": round(wall, 1),
+  }
+
+
+def failures(row: dict) -> int:
+  return sum(row[k] for k in COUNTERS)
+
+
+def report_md(res: dict) -> str:
+  lines = [f"# Soak: random and extreme actions through every task ({res['device']})", "",
+           f"Command: `{res['command']}`  ", f"Date: {res['date']}; total {res['total_s']} s", "",
+           f"{res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions uniform in [−1, 1] with "
+           f"{100 * res['extreme_frac']:g} % of entries replaced by one of ±1e3, NaN, ±inf. Every (env, step) is "
+           "checked on device (benchmarks/soak.py docstring defines the counters).", "",
+           "| task | steps | episodes | non-finite | health out of [0, 100] | health increases | particles | "
+           "particle-count violations | extreme entries sent | sanitised | sanitise mismatches | wall s |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+  for r in res["tasks"]:
+    lines.append(f"| {r['task']} | {r['steps']:,} | {r['episodes']:,} | {r['non_finite']} | {r['health_out_of_range']} | "
+                 f"{r['health_increase']} | {r['particles'] or '—'} | "
+                 f"{r['particle_violations'] if r['particles'] else '—'} | {r['extreme_injected']:,} | "
+                 f"{r['action_sanitised']:,} | {r['sanitise_mismatch']} | {r['wall_s']} |")
+  lines += ["", f"Result: {'PASS (every counter 0)' if res['ok'] else 'FAIL'}"]
+  return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+  p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                              formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+  gpu = jax.default_backend() != "cpu"
+  p.add_argument("--tasks", default=",".join(tasks.names()), help="comma-separated task names")
+  p.add_argument("--envs", type=int, default=512 if gpu else 8, help="environments per task")
+  p.add_argument("--steps", type=int, default=None,
+                 help="env steps per task, all envs together (default 1e6 on GPU, 3200 on CPU)")
+  p.add_argument("--chunk", type=int, default=None, help="steps per compiled scan (default 250 GPU, 200 CPU)")
+  p.add_argument("--extreme-frac", type=float, default=0.05, help="share of action entries made extreme")
+  p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/soak_<platform>.json)")
+  args = p.parse_args(argv)
+  names = [t for t in args.tasks.split(",") if t]
+  for t in names:
+    if t not in tasks.names():
+      p.error(f"--tasks: unknown task {t!r}; valid: {', '.join(tasks.names())}")
+  steps = args.steps if args.steps is not None else (1_000_000 if gpu else 3200)
+  chunk = args.chunk if args.chunk is not None else (250 if gpu else 200)
+  for flag, v in (("--envs", args.envs), ("--steps", steps), ("--chunk", chunk)):
+    if v < 1:
+      p.error(f"{flag}: must be >= 1, got {v}")
+  if not 0.0 <= args.extreme_frac <= 1.0:
+    p.error(f"--extreme-frac: must be in [0, 1], got {args.extreme_frac}")
+  per_env = -(-steps // args.envs)
+  dev = jax.devices()[0]
+  t0 = time.perf_counter()
+  rows = []
+  for name in names:
+    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed)
+    rows.append(r)
+    print(f"{name}: {r['steps']} steps, {r['episodes']} episodes, failures {failures(r)}, "
+          f"sanitised {r['action_sanitised']}, {r['wall_s']} s", flush=True)
+  res = {
+      "command": " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py",
+                                                   *(sys.argv[1:] if argv is None else argv)]),
+      "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')}", "host": platform.node(),
+      "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "total_s": round(time.perf_counter() - t0, 1),
+      "envs": args.envs, "steps_per_task": per_env * args.envs, "chunk": chunk, "extreme_frac": args.extreme_frac,
+      "seed": args.seed, "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+      "tasks": rows, "ok": all(failures(r) == 0 for r in rows),
+  }
+  out = args.out or os.path.join(HERE, "results", f"soak_{dev.platform}.json")
+  io.write_json(out, res)
+  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
+  print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")
+  return 0 if res["ok"] else 1
+
+
+if __name__ == "__main__":
+  sys.exit(main())

@@ -1,0 +1,81 @@
+"""benchmarks/soak.py: its on-device checks catch what they claim to, and a small soak of a task passes.
+
+The full soak (every task, the results file) is ``benchmarks/soak.py``; the
+``slow`` test here runs every task at a reduced size.
+"""
+
+import importlib.util
+import os
+
+import jax
+import jax.numpy as jnp
+import pytest
+from brax.envs.base import Wrapper
+
+import mjx_damage as md
+import tasks
+from mjx_damage.demo import DropEnv
+
+_path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "soak.py")
+_spec = importlib.util.spec_from_file_location("soak", _path)
+soak = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(soak)
+
+
+def run_soak(env, envs, chunks, chunk, extreme_frac, episode_length=None, seed=0) -> dict:
+  reset, run = soak.build(env, envs, chunk, extreme_frac, episode_length)
+  carry = reset(jax.random.PRNGKey(seed))
+  for _ in range(chunks):
+    carry = run(carry)
+  return {k: int(v) for k, v in jax.device_get(carry[-1]).items()}
+
+
+class ActedDrop(DropEnv):
+  """DropEnv with a 3-D action it ignores (the soak needs actions to sanitise)."""
+
+  episode_length = 8
+
+  @property
+  def action_size(self):
+    return 3
+
+
+class Corrupt(Wrapper):
+  """Breaks the invariants the soak checks whenever action[0] > 0.5: health +1 (so above 100 at
+  full health, and a rise), NaN observation."""
+
+  def step(self, state, action):
+    s = self.env.step(state, action)
+    hit = action[0] > 0.5
+    info = dict(s.info, link_health=s.info["link_health"] + jnp.where(hit, 1.0, 0.0))
+    return s.replace(obs=jnp.where(hit, jnp.nan, s.obs), info=info)
+
+
+def test_soak_counters_catch_broken_invariants():
+  clean = run_soak(md.DamageWrapper(ActedDrop()), envs=3, chunks=1, chunk=20, extreme_frac=0.2)
+  assert all(clean[k] == 0 for k in soak.COUNTERS), clean
+  assert clean["steps"] == 60 and clean["episodes"] == 3 * 2  # 20 steps of 8-step episodes: 2 ends per env
+  assert clean["action_sanitised"] == clean["extreme_injected"] > 0
+  broken = run_soak(Corrupt(md.DamageWrapper(ActedDrop())), envs=3, chunks=1, chunk=20, extreme_frac=0.2)
+  assert broken["non_finite"] > 0 and broken["health_out_of_range"] > 0 and broken["health_increase"] > 0, broken
+  assert broken["particle_violations"] == 0 and broken["sanitise_mismatch"] == 0
+
+
+def test_soak_place_plate_small():
+  """Two envs, 40 steps of 15-step episodes (auto-resets included), 20 % extreme action entries."""
+  c = run_soak(tasks.make("place_plate"), envs=2, chunks=2, chunk=20, extreme_frac=0.2, episode_length=15)
+  assert c["steps"] == 80 and c["episodes"] == 2 * 2
+  assert all(c[k] == 0 for k in soak.COUNTERS), c
+  assert c["action_sanitised"] == c["extreme_injected"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", tasks.names())
+def test_soak_every_task(name):
+  """The CPU defaults of benchmarks/soak.py (8 envs × 400 steps, chunks of 200) for one task."""
+  r = soak.soak_task(name, envs=8, steps=400, chunk=200, extreme_frac=0.05)
+  assert r["steps"] == 3200 and r["episodes"] >= 8 * 2
+  assert soak.failures(r) == 0, r
+  assert r["action_sanitised"] == r["extreme_injected"] > 0
+  if name == "pour_water":
+    assert r["particles"] > 0
