@@ -18,10 +18,6 @@ import numpy as np
 from mjx_damage import config as C
 from mjx_damage import liquid as Lq
 from mjx_damage import temperature as T
-# Re-exported for callers of the old paths (mjx_damage.wrapper imports them from here): contacts
-# are the backend's, link kinematics their own module. Drop once wrapper.py imports them there.
-from mjx_damage.backends.mjx_jax import contact_forces  # noqa: F401
-from mjx_damage.kinematics import link_acceleration, link_velocity  # noqa: F401
 from mjx_damage.params import DamageParams
 
 

@@ -51,7 +51,9 @@ from brax.envs.base import State, Wrapper
 
 from mjx_damage import health as H
 from mjx_damage import physics
-from mjx_damage.binding import bind, contact_forces, link_velocity
+from mjx_damage.backends.mjx_jax import contact_forces
+from mjx_damage.binding import bind
+from mjx_damage.kinematics import link_velocity
 from mjx_damage.params import DamageParams
 from mjx_damage.signals import LinkSignals
 

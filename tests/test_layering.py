@@ -29,7 +29,8 @@ OUTSIDE = ("benchmarks", "tests")  # scripts and tests sit on top; no package im
 # steps that drive a simulator (physics: MJX; native: MuJoCo), and binding's
 # re-export of contact_forces for callers of its old path (drop it once
 # wrapper.py imports from mjx_damage.backends.mjx_jax).
-BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.native", "mjx_damage.binding")
+# the wrapper reads contacts itself for foreign envs (damage once per env step)
+BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.native", "mjx_damage.wrapper")
 
 
 def discover(root: str, packages=LAYERS) -> dict[str, str]:

@@ -14,7 +14,7 @@ from brax.envs.base import Wrapper
 
 import mjx_damage as md
 import tasks
-from mjx_damage.demo import DropEnv
+from tasks.drop import DropEnv
 
 _path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "soak.py")
 _spec = importlib.util.spec_from_file_location("soak", _path)

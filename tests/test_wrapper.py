@@ -150,7 +150,7 @@ def test_sanitise_action_rule():
   assert float(n) == 3.0
 
 
-class PushedDrop(md.demo.DropEnv):
+class PushedDrop(DropEnv):
   """DropEnv whose 3-D action is added to the plate's linear velocity (m/s): a NaN action
   reaching the physics would turn the whole state NaN. Records the action it was given."""
 
