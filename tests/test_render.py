@@ -21,13 +21,13 @@ import os
 import dataclasses
 
 import imageio.v2 as imageio
-import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
 from brax.envs.base import State
 from mujoco import mjx
+from PIL import ImageDraw
 
 from apps import render_cli, training_log
 from mjx_damage import plots
@@ -159,8 +159,6 @@ def test_overlay_bars_follow_health():
 
 
 def test_overlay_draws_header_readouts_and_caption(monkeypatch):
-  from PIL import ImageDraw
-
   drawn = []
   real_text = ImageDraw.ImageDraw.text
   monkeypatch.setattr(ImageDraw.ImageDraw, "text", lambda self, xy, text, *a, **k: (
