@@ -28,8 +28,8 @@ watchdog; ``docs/cpu_stall.md`` has the evidence.
 command starts in seconds. Default location: ``$XDG_CACHE_HOME/mjx_damage/jax``
 (``~/.cache/mjx_damage/jax``). A ``JAX_COMPILATION_CACHE_DIR`` the user set
 already wins. The cache saves XLA compilation only: a warm run still imports
-the packages and traces the step in Python (on a 2-core CPU ≈ 5 s and ≈ 10 s
-of a ≈ 20 s warm eval; ``benchmarks/compile_cache.py``).
+the packages and traces the step in Python (on a 2-core CPU ≈ 3 s and 5–10 s
+of a 10–18 s warm ``mjx-damage eval``; ``benchmarks/compile_cache.py``).
 """
 
 from __future__ import annotations
