@@ -133,7 +133,7 @@ def frame_labels(traj: Trajectory, t: int, b: int = 0) -> tuple:
     caption.append("heat source: " + ", ".join(
         f"{name} {temp:.0f} °C" for name, temp in zip(traj.source_names, traj.source_temperature[t, b])))
   if traj.particles is not None:
-    caption.append(f"water: {traj.particles.shape[2]} particles (blue), r {1000 * traj.particle_radius:.0f} mm")
+    caption.append(f"liquid: {traj.particles.shape[2]} particles (blue), r {1000 * traj.particle_radius:.0f} mm")
   return headers, readouts, caption
 
 

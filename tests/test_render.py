@@ -277,7 +277,7 @@ def test_wet_rollout_records_particles_and_heat(wet):
   assert headers == ["max °C", "wet (particles)"] and len(readouts) == 1 and len(readouts[0]) == 2
   text = "\n".join(caption)
   assert "episode damage" in text and "hp" in text and "keeps counting after health 0" in text
-  assert "hot 200 °C" in text and f"water: {WET_P} particles" in text and "by model: mechanical" in text
+  assert "hot 200 °C" in text and f"liquid: {WET_P} particles" in text and "by model: mechanical" in text
 
 
 def test_particles_are_drawn(wet):
