@@ -142,9 +142,8 @@ def _temperature_ax(ax, traj, b):
     ax.plot(t, traj.temperature[:, b, links].max(axis=1), lw=2, label=f"{name} (hottest link)")
   for s, name in enumerate(traj.source_names):
     ax.plot(t, traj.source_temperature[:, b, s], "--", lw=1, color="C3", label=f"heat source '{name}'")
-  ax.set_yscale("symlog", linthresh=100.0)  # links near ambient and a 400 °C source on one axis
   ax.set_xlabel("time since reset (s)")
-  ax.set_ylabel("temperature (°C, symlog above 100)")
+  ax.set_ylabel("temperature (°C)")
   ax.set_title("temperature", fontsize=9)
   ax.legend(fontsize=7, loc="best")
 

@@ -97,7 +97,7 @@ def glow_rgba(base_rgba: np.ndarray, source_geom: np.ndarray, source_temperature
   w = np.clip((np.asarray(source_temperature, np.float32) - ambient) / GLOW_SPAN, 0.0, 1.0)[:, None]
   g = np.asarray(source_geom)
   rgba[g, :3] = (1.0 - w) * rgba[g, :3] + w * GLOW_RGB
-  rgba[g, 3] = np.maximum(rgba[g, 3], 0.15 + 0.6 * w[:, 0])
+  rgba[g, 3] = np.maximum(rgba[g, 3], 0.15 + 0.35 * w[:, 0])  # translucent: what is inside stays visible
   return rgba
 
 
@@ -143,15 +143,18 @@ def overlay_layout(height: int, width: int, traj: Trajectory, t: int = 0, b: int
   return bar_layout(height, width, traj.entity_names, readouts, headers)
 
 
-def camera_of(model, data, camera, tracked_bodies):
-  """A camera argument (None, 'free', a camera name or id, or an MjvCamera) → what update_scene takes."""
+def camera_of(model, data, camera, tracked_bodies, extra_geoms=()):
+  """A camera argument (None, 'free', a camera name or id, or an MjvCamera) → what update_scene takes.
+
+  The free camera frames ``tracked_bodies`` and ``extra_geoms`` (heat sources) at their pose in ``data``.
+  """
   if camera is None or camera == "free":
     cam = mujoco.MjvCamera()
     mujoco.mjv_defaultFreeCamera(model, cam)
     # Look at the tracked objects (at reset) rather than the model's centre, which
     # large static geoms (floors) pull away from where things happen.
-    if len(tracked_bodies):
-      pts = data.xpos[tracked_bodies]
+    if len(tracked_bodies) or len(extra_geoms):
+      pts = np.concatenate([data.xpos[np.asarray(tracked_bodies, int)], data.geom_xpos[np.asarray(extra_geoms, int)]])
       cam.lookat[:] = pts.mean(axis=0)
       spread = float(np.max(np.linalg.norm(pts - pts.mean(axis=0), axis=1)))
       cam.distance = max(0.5, 3.0 * spread)
@@ -219,7 +222,8 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
         data.mocap_quat[:] = traj.mocap_quat[t, b]
       mujoco.mj_forward(model, data)
       if cam is None:  # framed on the reset state and then held still
-        cam = camera_of(model, data, camera, tracked_bodies)
+        sources = traj.source_geom if traj.source_geom is not None else ()
+        cam = camera_of(model, data, camera, tracked_bodies, sources)
       rgba = tinted_rgba(base, traj.geom_link, traj.link_health[t, b]) if tint else base
       if tint and traj.source_temperature is not None:
         rgba = glow_rgba(rgba, traj.source_geom, traj.source_temperature[t, b], traj.ambient)
