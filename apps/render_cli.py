@@ -31,7 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
   ap.add_argument("--height", type=int, default=480)
   ap.add_argument("--camera", default=None, help="'free' (default) or a camera name of the scene")
   ap.add_argument("--fps", type=float, default=None, help="playback rate (default: real time)")
-  ap.add_argument("--plots", default=None, metavar="DIR", help="also write rollout plots (PNG, env 0) to DIR")
+  ap.add_argument("--plots", default=None, metavar="DIR",
+                  help="also write rollout plots (PNG, env 0) to DIR: health, contact load, damage per step, "
+                       "and temperature / wetness where the scene has heat sources / liquid")
   ap.add_argument("--training-log", default=None, metavar="PATH",
                   help="a training run's metrics.jsonl (or run dir): its curves go to --plots DIR too")
   return ap
@@ -74,8 +76,8 @@ def main(argv=None) -> int:
   final = traj.entity_health[-1]
   for b, path in enumerate(res.paths):
     health = ", ".join(f"{n} {h:.1f}" for n, h in zip(traj.entity_names, final[b]))
-    print(f"wrote {path}: {steps} steps ({steps * traj.dt:.2f} s), final health: {health}, "
-          f"cost {traj.cost[:, b].sum():.2f}")
+    print(f"wrote {path}: {steps} steps ({steps * traj.dt:.2f} s), final health: {health} (0-100), "
+          f"episode damage {traj.cost[:, b].sum():.2f} health points (keeps counting after health 0)")
   if args.plots:
     title = f"{args.task} / {args.policy} (seed {args.seed})"
     written = list(plots.plot_rollout(traj, args.plots, title=title).values())

@@ -33,8 +33,16 @@ How it works:
   tinted toward red by (100 − h)/100 of that link's health (an entity's health is
   the min over its links, so its most damaged link shows the value on its bar);
   untracked geoms keep their colours.
-* Overlay: one labelled bar per tracked entity (name, value, colour green →
-  red), whether or not the entity is in view, plus time and cumulative cost.
+* Overlay (:func:`frame_labels`): a header "health (0-100)" and one bar per
+  tracked entity (name, value, colour green → red), whether or not the entity
+  is in view; with heat sources a column of each entity's hottest link (°C),
+  with liquid one of the particles touching it. Bottom-left: time, the
+  episode's damage in health points (it keeps counting after a health reaches
+  0: the models still evaluate abuse of a destroyed object, as the cost does),
+  its split by damage model, each heat source's temperature, the liquid.
+* Every damage model the scene drives is visible: liquid particles are drawn
+  as blue spheres added to MuJoCo's scene each frame; heat source geoms glow
+  (orange, more opaque the hotter the source).
 
 MP4 (imageio-ffmpeg, H.264) or GIF (Pillow) by the output's extension.
 """
@@ -51,20 +59,102 @@ import numpy as np
 
 # Re-exported: `from mjx_damage.render import ...` is the documented entry point to all of it.
 from mjx_damage.gl import ensure_gl, gl_backend  # noqa: F401
-from mjx_damage.overlay import TINT_RGB, draw_health_bars, health_bar_boxes, health_color, tinted_rgba  # noqa: F401
-from mjx_damage.trajectory import Trajectory, binding_of, positive_int, mj_model_of, rollout  # noqa: F401
+from mjx_damage.overlay import (TINT_RGB, bar_layout, draw_health_bars, health_bar_boxes, health_color,  # noqa: F401
+                                tinted_rgba)
+from mjx_damage.trajectory import MODELS, Trajectory, binding_of, positive_int, mj_model_of, rollout  # noqa: F401
 from mjx_damage.video import OUTPUT_FORMATS, check_out, write_video  # noqa: F401
 
 
-def camera_of(model, data, camera, tracked_bodies):
-  """A camera argument (None, 'free', a camera name or id, or an MjvCamera) → what update_scene takes."""
+WATER_RGBA = np.array([0.15, 0.45, 1.0, 0.9], np.float32)  # liquid particles
+GLOW_RGB = np.array([1.0, 0.45, 0.05], np.float32)  # a heat source at full glow
+GLOW_SPAN = 300.0  # °C above ambient at which a source glows fully
+
+
+def add_spheres(scene, centres: np.ndarray, radius: float, rgba=WATER_RGBA) -> int:
+  """Append one sphere per row of ``centres`` (f[P, 3] world frame, m) to an ``MjvScene``.
+
+  Call after ``Renderer.update_scene`` (which resets the scene's geoms). Stops
+  at the scene's capacity; returns the number added.
+  """
+  n = max(0, min(len(centres), scene.maxgeom - scene.ngeom))
+  size = np.array([radius, 0.0, 0.0])
+  eye = np.eye(3).ravel()
+  rgba = np.asarray(rgba, np.float32)
+  for p in np.asarray(centres[:n], np.float64):
+    mujoco.mjv_initGeom(scene.geoms[scene.ngeom], int(mujoco.mjtGeom.mjGEOM_SPHERE), size, p, eye, rgba)
+    scene.ngeom += 1
+  return n
+
+
+def glow_rgba(base_rgba: np.ndarray, source_geom: np.ndarray, source_temperature: np.ndarray,
+              ambient: float) -> np.ndarray:
+  """Geom colours with each heat source's geom lerped toward orange by (T − ambient)/300 °C.
+
+  base_rgba f32[G, 4]; source_geom i32[S]; source_temperature f32[S] °C. Its alpha
+  rises with the glow (a hot translucent flame shows). Returns a new array.
+  """
+  rgba = np.array(base_rgba, np.float32, copy=True)
+  w = np.clip((np.asarray(source_temperature, np.float32) - ambient) / GLOW_SPAN, 0.0, 1.0)[:, None]
+  g = np.asarray(source_geom)
+  rgba[g, :3] = (1.0 - w) * rgba[g, :3] + w * GLOW_RGB
+  rgba[g, 3] = np.maximum(rgba[g, 3], 0.15 + 0.35 * w[:, 0])  # translucent: what is inside stays visible
+  return rgba
+
+
+def _per_entity(values: np.ndarray, link_entity: np.ndarray, n: int, reduce) -> list:
+  return [float(reduce(values[link_entity == i])) if np.any(link_entity == i) else float("nan") for i in range(n)]
+
+
+def frame_labels(traj: Trajectory, t: int, b: int = 0) -> tuple:
+  """What the overlay of frame ``t`` of env ``b`` says: (headers, readouts per entity, caption lines).
+
+  Headers/readouts: "max °C" (hottest link of the entity) with heat sources;
+  "wet (particles)" (liquid particles within contact distance of the entity's
+  links, a particle touching two links counted twice) with liquid.
+  """
+  n = len(traj.entity_names)
+  headers, columns = [], []
+  if "thermal" in traj.modalities and traj.temperature is not None:
+    headers.append("max °C")
+    temps = _per_entity(traj.temperature[t, b], traj.link_entity, n, np.max)
+    columns.append([f"{x:.0f}" for x in temps])
+  if "fluid" in traj.modalities and traj.exposure is not None:
+    headers.append("wet (particles)")
+    wet = _per_entity(traj.exposure[t, b], traj.link_entity, n, np.sum)
+    columns.append([f"{x:.0f}" for x in wet])
+  readouts = [tuple(c[i] for c in columns) for i in range(n)] if columns else None
+  episode = float(np.sum(traj.cost[: t + 1, b]))
+  caption = [f"t {t * traj.dt:5.2f} s",
+             f"episode damage {episode:.1f} hp (keeps counting after health 0)"]
+  if traj.damage is not None and len(traj.modalities) > 1:
+    by = np.sum(traj.damage[: t + 1, b], axis=0)
+    caption.append("by model: " + ", ".join(f"{m} {by[MODELS.index(m)]:.1f}" for m in traj.modalities))
+  if traj.source_temperature is not None:
+    caption.append("heat source: " + ", ".join(
+        f"{name} {temp:.0f} °C" for name, temp in zip(traj.source_names, traj.source_temperature[t, b])))
+  if traj.particles is not None:
+    caption.append(f"liquid: {traj.particles.shape[2]} particles (blue), r {1000 * traj.particle_radius:.0f} mm")
+  return headers, readouts, caption
+
+
+def overlay_layout(height: int, width: int, traj: Trajectory, t: int = 0, b: int = 0) -> tuple:
+  """(font, row, pad, bar boxes, readout column x's, panel box) of frame ``t``'s overlay (tests, figures)."""
+  headers, readouts, _ = frame_labels(traj, t, b)
+  return bar_layout(height, width, traj.entity_names, readouts, headers)
+
+
+def camera_of(model, data, camera, tracked_bodies, extra_geoms=()):
+  """A camera argument (None, 'free', a camera name or id, or an MjvCamera) → what update_scene takes.
+
+  The free camera frames ``tracked_bodies`` and ``extra_geoms`` (heat sources) at their pose in ``data``.
+  """
   if camera is None or camera == "free":
     cam = mujoco.MjvCamera()
     mujoco.mjv_defaultFreeCamera(model, cam)
     # Look at the tracked objects (at reset) rather than the model's centre, which
     # large static geoms (floors) pull away from where things happen.
-    if len(tracked_bodies):
-      pts = data.xpos[tracked_bodies]
+    if len(tracked_bodies) or len(extra_geoms):
+      pts = np.concatenate([data.xpos[np.asarray(tracked_bodies, int)], data.geom_xpos[np.asarray(extra_geoms, int)]])
       cam.lookat[:] = pts.mean(axis=0)
       spread = float(np.max(np.linalg.norm(pts - pts.mean(axis=0), axis=1)))
       cam.distance = max(0.5, 3.0 * spread)
@@ -85,9 +175,12 @@ def camera_of(model, data, camera, tracked_bodies):
 
 
 def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int = 480, camera=None,
-                  env_index: int = 0, overlay: bool = True, tint: bool = True,
+                  env_index: int = 0, overlay: bool = True, tint: bool = True, particles: bool = True,
                   segmentation: bool = False) -> np.ndarray:
   """uint8[T + 1, height, width, 3]: env ``env_index`` of ``traj``, tinted, with health bars.
+
+  ``particles``: draw the liquid (when the scene has one); heat sources glow
+  with ``tint``.
 
   ``segmentation=True`` returns instead i32[T + 1, height, width], the geom id
   seen at each pixel (−1: none), from the same camera: which pixels show which
@@ -110,7 +203,9 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
     model.geom_matid[has_mat] = -1
   data = mujoco.MjData(model)
   b = env_index
-  renderer = mujoco.Renderer(model, height=height, width=width)
+  draw_liquid = particles and traj.particles is not None and not segmentation
+  extra = traj.particles.shape[2] if draw_liquid else 0
+  renderer = mujoco.Renderer(model, height=height, width=width, max_geom=10000 + extra)
   if segmentation:
     renderer.enable_segmentation_rendering()
     overlay = False
@@ -119,7 +214,6 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
                       np.int32 if segmentation else np.uint8)
     cam = None
     tracked_bodies = np.unique(np.asarray(_body_of_links(model, traj)))
-    cum_cost = np.cumsum(traj.cost[:, b])
     for t in range(traj.steps + 1):
       data.qpos[:] = traj.qpos[t, b]
       data.qvel[:] = traj.qvel[t, b]
@@ -128,15 +222,21 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
         data.mocap_quat[:] = traj.mocap_quat[t, b]
       mujoco.mj_forward(model, data)
       if cam is None:  # framed on the reset state and then held still
-        cam = camera_of(model, data, camera, tracked_bodies)
-      model.geom_rgba[:] = tinted_rgba(base, traj.geom_link, traj.link_health[t, b]) if tint else base
+        sources = traj.source_geom if traj.source_geom is not None else ()
+        cam = camera_of(model, data, camera, tracked_bodies, sources)
+      rgba = tinted_rgba(base, traj.geom_link, traj.link_health[t, b]) if tint else base
+      if tint and traj.source_temperature is not None:
+        rgba = glow_rgba(rgba, traj.source_geom, traj.source_temperature[t, b], traj.ambient)
+      model.geom_rgba[:] = rgba
       renderer.update_scene(data, camera=cam)
+      if draw_liquid:
+        add_spheres(renderer.scene, traj.particles[t, b], traj.particle_radius)
       img = renderer.render()
       if segmentation:  # channel 0: object id, channel 1: object type
         img = np.where(img[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), img[..., 0], -1)
       elif overlay:
-        caption = f"t {t * traj.dt:5.2f} s   cost {cum_cost[t]:6.1f}"
-        img = draw_health_bars(img, traj.entity_names, traj.entity_health[t, b], caption)
+        headers, readouts, caption = frame_labels(traj, t, b)
+        img = draw_health_bars(img, traj.entity_names, traj.entity_health[t, b], caption, readouts, headers)
       frames[t] = img
   finally:
     renderer.close()  # free the GL context now, not at interpreter exit
@@ -169,7 +269,8 @@ class RenderResult:
 
 def render_rollout(env, policy: Callable, *, steps: int, seed: int = 0, out: Optional[str] = None,
                    width: int = 640, height: int = 480, camera=None, fps: Optional[float] = None,
-                   num_envs: int = 1, overlay: bool = True, tint: bool = True) -> RenderResult:
+                   num_envs: int = 1, overlay: bool = True, tint: bool = True,
+                   particles: bool = True) -> RenderResult:
   """Roll ``policy`` out in ``num_envs`` envs of ``env`` and render every step of each.
 
   Args:
@@ -185,7 +286,8 @@ def render_rollout(env, policy: Callable, *, steps: int, seed: int = 0, out: Opt
       id, or a ``mujoco.MjvCamera``.
     fps: playback rate; default real time (1 / env.dt).
     num_envs: environments simulated together (one compiled step).
-    overlay, tint: draw the health bars / tint damaged links (on by default).
+    overlay, tint, particles: draw the labelled health bars / tint damaged
+      links and make heat sources glow / draw the liquid (all on by default).
 
   Raises:
     ValueError: bad arguments, checked before anything compiles.
@@ -205,7 +307,7 @@ def render_rollout(env, policy: Callable, *, steps: int, seed: int = 0, out: Opt
   frames, paths = [], []
   for b in range(num_envs):
     f = render_frames(mj_model, traj, width=width, height=height, camera=camera, env_index=b,
-                      overlay=overlay, tint=tint)
+                      overlay=overlay, tint=tint, particles=particles)
     frames.append(f)
     if out is not None:
       paths.append(write_video(f, _env_path(os.fspath(out), b, num_envs), fps))

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-from typing import Callable
+from typing import Callable, Optional
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+MODELS = ("mechanical", "thermal", "fluid")  # order of Trajectory.damage's last axis
 
 
 @dataclasses.dataclass
@@ -25,8 +27,19 @@ class Trajectory:
   Per step (leading axes [T + 1, B]): ``qpos``, ``qvel``, ``mocap_pos``, ``mocap_quat``
   (what a frame needs), ``entity_health`` [.., N], ``link_health`` [.., L],
   ``f_par``/``f_perp`` [.., L] (peak contact loads of the step, N), ``cost`` (damage
-  of the step), ``reward``, ``success``, ``done``. Per env: ``alpha``, ``beta``,
-  ``mech_threshold`` [B, L] (mechanical parameters, for the load plot).
+  evaluated in the step, health points, all links and models; it keeps counting
+  after a link's health is clipped at 0), ``damage`` [.., 3] (the same split by
+  model, in :data:`MODELS` order), ``temperature`` [.., L] (°C), ``exposure``
+  [.., L] (liquid particles touching each link), ``reward``, ``success``, ``done``.
+  Per env: ``alpha``, ``beta``, ``mech_threshold`` [B, L] (mechanical
+  parameters, for the load plot).
+
+  Scene models, None where the scene has none: ``particles`` f32[T + 1, B, P, 3]
+  (liquid particle centres, world frame, m) with ``particle_radius`` (m);
+  ``source_temperature`` f32[T + 1, B, S] (each heat source's temperature, °C,
+  ambient while off) with ``source_names``, ``source_geom`` i32[S] and ``ambient`` (°C).
+  ``modalities``: the damage models the scene can drive ("mechanical" always,
+  "thermal" with heat sources, "fluid" with liquid).
   """
 
   qpos: np.ndarray
@@ -49,6 +62,16 @@ class Trajectory:
   link_entity: np.ndarray
   geom_link: np.ndarray
   dt: float
+  damage: Optional[np.ndarray] = None
+  temperature: Optional[np.ndarray] = None
+  exposure: Optional[np.ndarray] = None
+  particles: Optional[np.ndarray] = None
+  particle_radius: float = 0.0
+  source_temperature: Optional[np.ndarray] = None
+  source_names: tuple = ()
+  source_geom: Optional[np.ndarray] = None
+  ambient: float = 22.0
+  modalities: tuple = ("mechanical",)
 
   @property
   def steps(self) -> int:
@@ -69,7 +92,16 @@ def _record(state, done_before):
   d, info = state.pipeline_state, state.info
   ds = info["damage_state"]
   live = 1.0 - done_before  # a finished (frozen) env adds no more cost
+  sd = ds.step_damage
+  extra = {}
+  if ds.liquid is not None:
+    extra["particles"] = ds.liquid.pos
+  if ds.thermal is not None:  # the source's temperature is formed on the host (ambient is static)
+    extra["source_on"], extra["source_set"] = ds.thermal.source_on, ds.thermal.source_temperature
   return {
+      **extra,
+      "damage": jnp.stack([jnp.sum(sd.mechanical), jnp.sum(sd.thermal), jnp.sum(sd.fluid)]) * live,
+      "temperature": ds.temperature, "exposure": ds.exposure,
       "qpos": d.qpos, "qvel": d.qvel, "mocap_pos": d.mocap_pos, "mocap_quat": d.mocap_quat,
       "entity_health": info["entity_health"], "link_health": info["link_health"],
       "f_par": ds.f_par * live, "f_perp": ds.f_perp * live, "cost": info["cost"] * live,
@@ -167,8 +199,17 @@ def rollout(env, policy: Callable, *, steps: int, seed: int = 0, num_envs: int =
     recs.append(jax.device_get(rec))
   stacked = {k: np.stack([np.asarray(r[k]) for r in recs]) for k in recs[0]}
   params = jax.device_get(state.info["damage_state"].params)
+  tm, lm = binding.thermal, binding.liquid
+  modalities = ("mechanical",) + (("thermal",) if tm is not None else ()) + (("fluid",) if lm is not None else ())
+  scene = {"modalities": modalities}
+  if "source_on" in stacked:
+    on, setp = stacked.pop("source_on"), stacked.pop("source_set")
+    scene.update(source_temperature=tm.ambient + on * (setp - tm.ambient), source_names=tuple(tm.source_names),
+                 source_geom=np.asarray(tm.source_geom), ambient=float(tm.ambient))
+  if "particles" in stacked:
+    scene["particle_radius"] = float(lm.radius)
   return Trajectory(
-      **stacked,
+      **stacked, **scene,
       alpha=np.asarray(params.alpha), beta=np.asarray(params.beta),
       mech_threshold=np.asarray(params.mech_threshold),
       entity_names=tuple(binding.entity_names), link_names=tuple(binding.link_names),

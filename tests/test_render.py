@@ -7,6 +7,10 @@ plate low enough to hit and break within those steps; the other envs' plates
 are still intact. The CLI test runs the same task/policy/batch, so its step
 program is the same and comes from the persistent compilation cache.
 
+The liquid and heat overlays come from a small scene (``tests/scenes/liquid_glass.xml``:
+a glass of water on a hinge beside a laptop; the glass's bottom doubles as a
+200 °C heat source): 1 environment, 3 steps, one compile of its own.
+
 Rendering is headless (OSMesa from Debian's libosmesa6, installed by `make
 install`): if the GL library is missing these tests FAIL with the package name.
 """
@@ -14,13 +18,32 @@ install`): if the GL library is missing these tests FAIL with the package name.
 import json
 import os
 
+import dataclasses
+
 import imageio.v2 as imageio
+import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
+from brax.envs.base import State
+from mujoco import mjx
+from PIL import ImageDraw
 
 from apps import render_cli, training_log
 from mjx_damage import plots
 from mjx_damage import render as R
+from mjx_damage.env import DamageEnv
+from mjx_damage.overlay import HEALTH_HEADER, caption_box
+from mjx_damage.wrapper import DamageWrapper
+
+WET_SCENE = os.path.join(os.path.dirname(__file__), "scenes", "liquid_glass.xml")
+WET_P = 32
+WET_CONFIG = {
+    "entities": {"laptop": {"params": "laptop", "bodies": ["laptop"]}},
+    "liquid": {"particles": WET_P, "radius": 0.006,
+               "spawn": {"body": "glass", "offset": [0, 0, 0.045], "size": [0.02, 0.02, 0.03]}},
+    "temperature": {"sources": {"hot": {"geom": "glass_bottom", "temperature": 200.0, "on": True}}},
+}
 
 W, H = 160, 120
 STEPS, NUM_ENVS, SEED = 9, 8, 3
@@ -64,6 +87,37 @@ def drop(gl, tmp_path_factory):
   return env, res, seg, out
 
 
+class WetEnv(DamageEnv):
+  """The liquid-glass test scene as a damage env: action = the glass's tilt target (rad)."""
+
+  def __init__(self):
+    super().__init__(mujoco.MjModel.from_xml_path(WET_SCENE), WET_CONFIG, n_substeps=5)
+
+  @property
+  def observation_size(self):
+    return 1
+
+  @property
+  def action_size(self):
+    return 1
+
+  def reset(self, rng):
+    d = mjx.make_data(self.sys)
+    z = jnp.zeros(())
+    return State(d, d.qpos[:1], z, z, {"success": z}, {"damage_state": self.init_damage(rng)})
+
+  def step(self, state, action):
+    d, ds = self.physics_step(state.pipeline_state, state.info["damage_state"], action)
+    return state.replace(pipeline_state=d, obs=d.qpos[:1], info=dict(state.info, damage_state=ds))
+
+
+@pytest.fixture(scope="module")
+def wet(gl):
+  env = DamageWrapper(WetEnv())
+  res = R.render_rollout(env, lambda s, k: jnp.full((1,), 2.0), steps=3, seed=0, width=W, height=H)
+  return env, res
+
+
 # --- pure helpers -------------------------------------------------------------------------
 def test_tint_is_lerp_toward_red_by_lost_health():
   base = np.array([[1, 1, 1, 1], [1, 1, 1, 0.5], [0.2, 0.4, 0.8, 1], [0.5, 0.5, 0.5, 1]], np.float32)
@@ -102,6 +156,30 @@ def test_overlay_bars_follow_health():
   assert np.all(right == 70)
   assert plate_b[2, 2, 0] > plate_b[2, 2, 1]  # 40 → more red than green
   np.testing.assert_array_equal(a[my0:my1 + 1, mx0:mx1 + 1], b[my0:my1 + 1, mx0:mx1 + 1])
+
+
+def test_overlay_draws_header_readouts_and_caption(monkeypatch):
+  drawn = []
+  real_text = ImageDraw.ImageDraw.text
+  monkeypatch.setattr(ImageDraw.ImageDraw, "text", lambda self, xy, text, *a, **k: (
+      drawn.append(text), real_text(self, xy, text, *a, **k))[1])
+  frame = np.full((H, W, 3), 128, np.uint8)
+  caption = ["t 0.10 s", "episode damage 3.0 hp (keeps counting after health 0)"]
+  out = R.draw_health_bars(frame, ("laptop",), [50.0], caption, readouts=[("40", "7")],
+                           headers=("max °C", "wet (particles)"))
+  assert {HEALTH_HEADER, "max °C", "wet (particles)", "laptop", "50", "40", "7", *caption} <= set(drawn)
+  x0, y0, x1, y1 = caption_box(H, W, ("laptop",), caption)
+  assert y1 - y0 > 15 and np.abs(out[y0:y1, x0:x1].astype(int) - 128).mean() > 20  # caption panel drawn
+
+
+def test_glow_follows_source_temperature():
+  base = np.array([[0.5, 0.5, 0.5, 0.2], [0.1, 0.1, 0.1, 1.0]], np.float32)
+  cold = R.glow_rgba(base, np.array([0]), np.array([22.0]), ambient=22.0)
+  hot = R.glow_rgba(base, np.array([0]), np.array([22.0 + R.GLOW_SPAN]), ambient=22.0)
+  np.testing.assert_array_equal(cold[0, :3], base[0, :3])
+  np.testing.assert_allclose(hot[0, :3], R.GLOW_RGB)
+  assert hot[0, 3] > cold[0, 3] >= base[0, 3]
+  np.testing.assert_array_equal(hot[1], base[1])  # not a source: untouched
 
 
 # --- rendered rollouts ----------------------------------------------------------------------
@@ -162,6 +240,72 @@ def test_rollout_plots(drop, tmp_path):
   for p in paths.values():
     img = imageio.imread(p)
     assert img.shape[0] > 200 and img.std() > 10
+
+
+def test_rollout_plots_label_every_axis(drop, wet):
+  for traj, names in ((drop[1].trajectory, ["health", "load", "cost"]),
+                      (wet[1].trajectory, ["health", "load", "cost", "temperature", "wetness"])):
+    assert list(plots.panels_of(traj)) == names
+    fig = plots.rollout_figure(traj, 0, title="x")
+    try:
+      for ax in fig.axes:
+        assert ax.get_xlabel() and ax.get_ylabel(), (ax.get_title(), ax.get_xlabel(), ax.get_ylabel())
+        assert "(" in ax.get_ylabel(), f"no unit in {ax.get_ylabel()!r}"
+    finally:
+      plots._plt().close(fig)
+
+
+def test_load_plot_goes_log_when_a_spike_dwarfs_the_threshold(drop):
+  traj = drop[1].trajectory
+  big = dataclasses.replace(traj, f_par=traj.f_par * 0 + 1e4 * traj.mech_threshold[None].max())
+  fig, ax = plots._plt().subplots()
+  plots._load_ax(ax, big, DAMAGED_ENV)
+  assert ax.get_yscale() == "symlog" and "symlog" in ax.get_ylabel()
+  plots._plt().close(fig)
+
+
+# --- every damage model shows: liquid particles, heat, wetness -------------------------------
+def test_wet_rollout_records_particles_and_heat(wet):
+  _, res = wet
+  traj = res.trajectory
+  assert traj.modalities == ("mechanical", "thermal", "fluid")
+  assert traj.particles.shape == (4, 1, WET_P, 3) and traj.particle_radius == 0.006
+  assert traj.source_names == ("hot",) and np.all(traj.source_temperature[:, 0, 0] == 200.0)
+  assert traj.damage.shape == (4, 1, 3) and traj.temperature.shape == traj.exposure.shape == (4, 1, 1)
+  np.testing.assert_allclose(traj.damage.sum(-1), traj.cost, rtol=1e-5, atol=1e-6)
+  headers, readouts, caption = R.frame_labels(traj, 3, 0)
+  assert headers == ["max °C", "wet (particles)"] and len(readouts) == 1 and len(readouts[0]) == 2
+  text = "\n".join(caption)
+  assert "episode damage" in text and "hp" in text and "keeps counting after health 0" in text
+  assert "hot 200 °C" in text and f"liquid: {WET_P} particles" in text and "by model: mechanical" in text
+
+
+def test_particles_are_drawn(wet):
+  env, res = wet
+  model = R.mj_model_of(env)
+  laptop_top = model.body("laptop").pos + [0.0, 0.0, 0.016]
+  grid = np.stack(np.meshgrid(np.linspace(-0.1, 0.1, 8), np.linspace(-0.06, 0.06, 4), [0.0]), -1).reshape(-1, 3)
+  # the recorded particles moved onto the laptop, which the free camera frames, so they are in view
+  traj = dataclasses.replace(res.trajectory, particles=np.broadcast_to(
+      (laptop_top + grid)[None, None], res.trajectory.particles.shape).copy())
+  on = R.render_frames(model, traj, width=W, height=H, overlay=False)
+  off = R.render_frames(model, traj, width=W, height=H, overlay=False, particles=False)
+  changed = np.any(on != off, axis=-1)
+  assert changed.mean() > 0.01, "no particle pixels"
+  rgb = on[changed].astype(np.float32)
+  assert np.mean(rgb[:, 2] - rgb[:, 0]) > 40, "particle pixels should be blue"
+  seg = R.render_frames(model, traj, width=W, height=H, segmentation=True)
+  assert seg.shape == (4, H, W)  # segmentation ignores the particles
+
+
+def test_overlay_changes_the_frame_and_names_every_model(wet):
+  env, res = wet
+  model = R.mj_model_of(env)
+  plain = R.render_frames(model, res.trajectory, width=W, height=H, overlay=False)
+  _, row, pad, boxes, cols, panel = R.overlay_layout(H, W, res.trajectory)
+  x0, y0, x1, y1 = panel
+  assert len(cols) == 2  # max °C, wet (particles)
+  assert np.abs(res.frames[0][:, y0:y1, x0:x1].astype(int) - plain[:, y0:y1, x0:x1]).mean() > 10
 
 
 def test_training_log_plot(tmp_path):
