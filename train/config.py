@@ -17,8 +17,9 @@ Presets (``PPOConfig.preset(name, **overrides)``, ``mjx-damage train --preset NA
   env for 1e5 steps (≈ 195 rollouts of 512); here the rollout is batched over
   256 envs (8 minibatches of 32 sequences × 512 steps).
 * ``legacy`` — this trainer's defaults before the multi-seed rewrite (1024
-  envs, 8 minibatches, 4 epochs, entropy 1e-3, lr 3e-4, 256×2 swish); kept so
-  the committed single-seed rows can be rerun (benchmarks/place_plate_rl.py).
+  envs, 8 minibatches, 4 epochs, entropy 1e-3, lr 3e-4, 256×2 swish); kept for
+  comparison (the committed single-seed ``rl_place_plate_nvidia_h100_*`` rows of the
+  old in-hand start were made with it).
   Its GPU variant (16384 envs, 8 × 2048 sequences, 4 epochs) did 8× fewer SGD
   steps per env step than ``playground`` and sat at 0 % completion for 30–60 M
   env-steps on place_plate (benchmarks/rl_collapse_evidence.py).

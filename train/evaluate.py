@@ -241,7 +241,7 @@ def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: floa
 
 
 # The flat summary (scalars only) that training logs as ``eval/<key>`` and that
-# benchmarks/place_plate_rl.py reports: summary key → :func:`metrics` key.
+# benchmarks/rl_multiseed.py reports: summary key → :func:`metrics` key.
 SUMMARY_KEYS = {
     "completion": "completion",
     "safe_completion": "safe_completion",
