@@ -224,8 +224,9 @@ def main(argv=None) -> int:
         raise ValueError("--resume: needs --out (the run directory to continue)")
       args["out_dir"] = outputs.run_dir("train", task.rpartition(":")[2] or task)
     check_out(args["out_dir"], task, args["resume"], overwrite)
-  except ValueError as e:
-    p.error(str(e))
+  except ValueError as e:  # one line, status 2, as argparse's own errors (returned: callers test the status)
+    print(f"{p.prog}: error: {' '.join(str(e).split())}", file=sys.stderr)
+    return 2
 
   import jax  # after the checks: keeps --help and user errors fast
 
