@@ -3,7 +3,8 @@ directory, tiny sizes.
 
 * nothing appears there but ``runs/`` (no ``--out``) or the paths asked for;
 * a second identical ``train --out`` exits 2 in one line and leaves the first run's files byte-identical;
-* SIGINT while ``train`` compiles ends with status 130, one ``interrupted; …`` line, no traceback.
+* SIGINT while ``train`` compiles ends with status 130, one ``interrupted; …`` line, no traceback;
+* SIGINT during training does the same and leaves a readable checkpoint.
 
 The trainer runs on ``train.experiments.pusher:PusherEnv`` (one contact pair: compiles in seconds).
 """
@@ -103,3 +104,31 @@ def test_sigint_while_train_compiles_exits_130_without_traceback(tmp_path):
   assert proc.returncode == 130, err[-2000:]
   assert "Traceback" not in err and "Segmentation" not in err
   assert [ln for ln in err.splitlines() if ln.strip()][-1].startswith("interrupted"), err
+
+
+def test_sigint_during_training_keeps_a_checkpoint(tmp_path):
+  """SIGINT once the loop runs: train.ppo's handler finishes the iteration, writes the checkpoint, exits 130."""
+  args = [a for a in TRAIN if a != "--no-progress"]
+  args[args.index("--timesteps") + 1] = "80000"  # 1000 iterations: still running when the signal comes
+  proc = subprocess.Popen([sys.executable, "-m", "apps.cli", *args, "--out", "r"], cwd=tmp_path, env=_env(),
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+  err = b""
+  try:
+    while b"seeds" not in err:  # the progress bar exists: train.ppo's signal handler is about to be installed
+      chunk = os.read(proc.stderr.fileno(), 4096)
+      assert chunk, err.decode()[-2000:]
+      err += chunk
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=240)
+    err = (err + rest).decode()
+  finally:
+    if proc.poll() is None:
+      proc.kill()
+  assert proc.returncode == 130, err[-2000:]
+  assert "Traceback" not in err
+  last = [ln for ln in err.replace("\r", "\n").splitlines() if ln.strip()][-1]
+  assert last.startswith("interrupted") and "checkpoint at iteration" in last, last
+  from train import checkpoint as ckpt
+  meta = ckpt.read_meta(str(tmp_path / "r" / ckpt.FILENAME))
+  assert 1 <= meta["iteration"] < 1000
