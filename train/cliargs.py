@@ -12,8 +12,16 @@ import argparse
 import sys
 
 
-class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-  """Defaults appended to every option's help; descriptions printed as written."""
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+  """``(default: X)`` after every option that has a default its help does not already state;
+  descriptions printed as written."""
+
+  def _get_help_string(self, action):
+    text = action.help or ""
+    if ("(default" in text or action.default in (None, argparse.SUPPRESS) or action.required
+        or not action.option_strings or action.nargs == 0):
+      return text
+    return (text + " " if text else "") + "(default: %(default)s)"
 
 
 class Parser(argparse.ArgumentParser):
@@ -22,6 +30,12 @@ class Parser(argparse.ArgumentParser):
   def __init__(self, *args, **kwargs):
     kwargs.setdefault("formatter_class", HelpFormatter)
     super().__init__(*args, **kwargs)
+
+  def add_argument(self, *args, **kwargs):
+    action = super().add_argument(*args, **kwargs)
+    if not action.help and action.default not in (None, argparse.SUPPRESS) and action.nargs != 0:
+      action.help = "(default: %(default)s)"  # argparse prints no help line at all for an empty help
+    return action
 
   def error(self, message: str):
     print(f"{self.prog}: error: {' '.join(str(message).split())}", file=sys.stderr)
