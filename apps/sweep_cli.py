@@ -36,7 +36,7 @@ def build_parser() -> Parser:
   ap.add_argument("--seeds", default="0", help="comma-separated seeds")
   ap.add_argument("--fragility", default="1", help="comma-separated fragility factors (> 0)")
   ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
-  ap.add_argument("--episode-length", type=int, default=None)
+  ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
   ap.add_argument("--out", default=None, help="JSON path; the markdown table goes beside it (.md) "
                   "(default: runs/sweep-<tasks>-<time>/sweep.json, a new folder)")

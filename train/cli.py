@@ -126,14 +126,14 @@ def build_parser() -> Parser:
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode=paper")
   p.add_argument("--out", dest="out_dir", default=None,
-                 help="run directory (config, metrics, checkpoint, curves); default: runs/train-<task>-<time>/")
+                 help="run directory (config, metrics, checkpoint, curves) (default: runs/train-<task>-<time>/, a new folder)")
   p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.npz")
   p.add_argument("--overwrite", action="store_true", help="replace the run in an existing --out")
   p.add_argument("--preset", default="playground", choices=sorted(PRESETS), help="base settings (train/config.py)")
-  p.add_argument("--seeds", type=_ints, default=None, help="seeds trained together in one program, e.g. 0,1,2,3,4")
-  p.add_argument("--seed", type=_int, default=None, help="one seed (same as --seeds N)")
-  p.add_argument("--episode-length", type=_int, default=None, help="default: the task's")
-  p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds")
+  p.add_argument("--seeds", type=_ints, default=None, help="seeds trained together in one program, e.g. 0,1,2,3,4 (default: 0)")
+  p.add_argument("--seed", type=_int, default=None, help="one seed (same as --seeds N) (default: 0)")
+  p.add_argument("--episode-length", type=_int, default=None, help="env steps (default: the task's)")
+  p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds (default: no limit)")
   p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
   for flag, dest, typ, help_ in CONFIG_FLAGS:
     # default None = the preset's value, spelled out per preset (the formatter would only say None)
