@@ -46,10 +46,14 @@ def exists(path: str) -> bool:
   return os.path.isfile(path) or (os.path.isdir(path) and bool(os.listdir(path))) or os.path.islink(path)
 
 
-def check_new(paths: Iterable[str], flag: str = "--out", overwrite: bool = False, resumable: bool = False) -> None:
+def check_new(paths: Iterable[str], flag: str = "--out", overwrite: bool = False, resumable: bool = False,
+              folder: bool = False) -> None:
   """Refuse (``ValueError`` naming ``flag``) when one of ``paths`` :func:`exists` and ``overwrite`` is
-  False; also refuse paths that cannot be written. ``resumable``: the message offers ``--resume`` too."""
+  False; also refuse paths that cannot be written, and a folder where a file is wanted (``folder``:
+  the paths are run folders). ``resumable``: the message offers ``--resume`` too."""
   for path in paths:
+    if not folder and os.path.isdir(path):
+      raise ValueError(f"{flag}: {path} is a folder; give a file path")
     if exists(path) and not overwrite:
       ways = "--resume to continue it or --overwrite to replace it" if resumable else "--overwrite to replace it"
       raise ValueError(f"{flag}: {path} already exists; pass {ways}, or choose another {flag}")

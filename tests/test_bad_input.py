@@ -116,6 +116,7 @@ CLI_CASES = [
     (["eval", "--task", "drop", "--policy", "zero", "--seed", "-1"], "seed"),
     (["eval", "--task", "drop", "--policy", "zero", "--out", "{tmp}/exists.json"], "--overwrite"),
     (["eval", "--task", "drop", "--policy", "zero", "--out", "{tmp}/afile/result.json"], "--out"),
+    (["eval", "--task", "drop", "--policy", "zero", "--out", "{tmp}/run"], "folder"),
     (["eval", "--task", "drop"], "--policy"),
     (["sweep", "--tasks", "drop,no_such_task", "--policies", "zero"], "task"),
     (["sweep", "--tasks", "drop", "--policies", "zero,bogus"], "policy"),

@@ -180,7 +180,7 @@ def check_out(out_dir: str, task: str, resume: bool, overwrite: bool) -> None:
     if old != task:
       raise ValueError(f"--resume: the run in {out_dir} trained task {old!r}, not {task!r}")
     return
-  outputs.check_new([out_dir], "--out", overwrite, resumable=True)
+  outputs.check_new([out_dir], "--out", overwrite, resumable=True, folder=True)
 
 
 def check_task(task: str) -> None:
