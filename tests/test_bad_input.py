@@ -28,6 +28,7 @@ from train import evaluate as E
 
 FAST_S = 5.0  # generous for a loaded 2-core machine; a compile takes far longer
 
+PUSHER = "train.experiments.pusher:PusherEnv"
 _SCENE = os.path.join(os.path.dirname(__file__), "scenes", "heat.xml")
 
 
@@ -40,6 +41,9 @@ def _prepare(tmp) -> None:
   os.makedirs(os.path.join(tmp, "other_task"))
   ckpt.save(os.path.join(tmp, "other_task", ckpt.FILENAME), {"x": np.zeros(2)}, {"y": np.zeros(1)},
             {"task": "pick_egg", "config": {}})
+  os.makedirs(os.path.join(tmp, "other_config"))
+  ckpt.save(os.path.join(tmp, "other_config", ckpt.FILENAME), {"x": np.zeros(2)}, {"y": np.zeros(1)},
+            {"task": PUSHER, "config": {"num_envs": 3}})
   os.makedirs(os.path.join(tmp, "corrupt"))
   with open(os.path.join(tmp, "corrupt", ckpt.FILENAME), "wb") as f:
     f.write(b"PK\x03\x04 not a zip")
@@ -144,6 +148,8 @@ CLI_CASES = [
     (["train", "--task", "place_plate", "--out", "{tmp}/nothing_here", "--resume"], "--resume"),
     (["train", "--task", "place_plate", "--out", "{tmp}/other_task", "--resume"], "pick_egg"),
     (["train", "--task", "place_plate", "--out", "{tmp}/corrupt", "--resume"], "checkpoint"),
+    (["train", "--task", PUSHER, "--out", "{tmp}/other_config", "--resume", "--num-envs", "8", "--batch-size", "8",
+      "--num-minibatches", "1"], "different config"),
     (["train", "--task", "place_plate", "--resume"], "--resume"),
     (["bench", "--envs", "0,4"], "--envs"),
     (["bench", "--k", "4", "--tracked", "1,8"], "--tracked"),
