@@ -2,25 +2,28 @@
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
+from train.cliargs import Parser
+
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="mjx-damage demo", description=__doc__)
-  ap.add_argument("--envs", type=int, default=256, help="parallel environments (default 256)")
-  ap.add_argument("--seconds", type=float, default=1.0, help="simulated time per env (default 1 s)")
+  ap = Parser(prog="mjx-damage demo", description=__doc__ + " Prints a table; writes no file.")
+  ap.add_argument("--envs", type=int, default=256, help="parallel environments")
+  ap.add_argument("--seconds", type=float, default=1.0, help="simulated time per env, s")
   ap.add_argument("--max-height", type=float, default=0.12, help="highest drop above the counter, m")
   ap.add_argument("--seed", type=int, default=0)
   args = ap.parse_args(argv)
   if args.envs < 1:
     ap.error("--envs: must be >= 1")
-  if not args.seconds > 0:
-    ap.error("--seconds: must be > 0")
-  if not args.max_height >= 0:
-    ap.error("--max-height: must be >= 0")
+  if not 0 < args.seconds < 1e4:
+    ap.error(f"--seconds: must be in (0, 1e4), got {args.seconds}")
+  if not 0 <= args.max_height < 100:
+    ap.error(f"--max-height: must be in [0, 100) m, got {args.max_height}")
+  if args.seed < 0:
+    ap.error(f"--seed: must be >= 0, got {args.seed}")
 
   import jax  # imported after parsing: keeps `--help` fast
   import jax.numpy as jnp
@@ -38,6 +41,9 @@ def main(argv=None) -> int:
     state = jax.lax.fori_loop(0, steps, lambda _, s: jax.vmap(env.step)(s, act), state)
     return state.info["drop_height"], state.info["entity_health"], state.info["damage_episode"]["damaged"]
 
+  print(f"demo: drop scene, {args.envs} envs x {steps} steps, device {jax.default_backend()} x "
+        f"{jax.device_count()}; writes no file", flush=True)
+  print("compiling, about 20 s the first time (seconds once cached) ...", flush=True)
   t0 = time.perf_counter()
   compiled = rollout.lower(jax.random.PRNGKey(args.seed)).compile()
   t1 = time.perf_counter()

@@ -7,24 +7,33 @@ evaluation itself: :func:`train.evaluate.evaluate`.
 
 from __future__ import annotations
 
-import argparse
+import os
 import sys
 import time
 
+import jax
+
 from apps import resolve as R
+from mjx_damage import outputs
 from mjx_damage.io import write_json
 from train import evaluate as E
+from train.cliargs import Parser
+
+# Rough first-compile times of a task's evaluation (s; the persistent cache makes later runs start in seconds).
+COMPILE_S = {"cpu": 40, "gpu": 60}
 
 
-def build_parser() -> argparse.ArgumentParser:
-  ap = argparse.ArgumentParser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
+def build_parser() -> Parser:
+  ap = Parser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
   R.add_task_policy_arguments(ap)
   ap.add_argument("--episodes", type=int, default=64)
   ap.add_argument("--seed", type=int, default=0)
   ap.add_argument("--fragility", type=float, default=1.0, help="thresholds ÷ f, scales × f (default 1)")
   ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
-  ap.add_argument("--out", default=None, help="write the result as JSON here")
+  ap.add_argument("--out", default=None,
+                  help="result JSON path (default: runs/eval-<task>-<time>/result.json, a new folder)")
+  ap.add_argument("--overwrite", action="store_true", help="replace an existing --out")
   ap.add_argument("--per-episode", action="store_true", help="include per-episode arrays in the JSON")
   return ap
 
@@ -38,29 +47,37 @@ def main(argv=None) -> int:
     E.check_args(args.episodes, args.fragility, args.safe_threshold, seed=args.seed)
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
+    if args.out is not None:
+      outputs.check_new([args.out], "--out", args.overwrite)
+    out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
+    env = R.make_task(args.task)
+    policy = R.make_policy(args.policy, env)
+    episode_length = args.episode_length or R.episode_length_of(env, args.task)
   except ValueError as e:
     ap.error(str(e))
-  env = R.make_task(args.task)
-  policy = R.make_policy(args.policy, env)
+  platform = jax.default_backend()
+  print(f"eval: task {args.task}, policy {args.policy}, {args.episodes} episodes x {episode_length} steps, "
+        f"fragility {args.fragility:g}, seed {args.seed}, device {platform} x {jax.device_count()}; "
+        f"output {out}", flush=True)
+  print(f"compiling, about {COMPILE_S.get(platform, 60)} s the first time (seconds once cached) ...", flush=True)
   t0 = time.perf_counter()
   res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
-                   episode_length=args.episode_length or R.episode_length_of(env, args.task),
+                   episode_length=episode_length,
                    safe_threshold=args.safe_threshold)
   wall = time.perf_counter() - t0
   title = (f"{args.task} / {args.policy}: {args.episodes} episodes x {res['episode_length']} steps, "
            f"fragility {args.fragility:g}, seed {args.seed}, {res['devices']} device(s), {wall:.1f} s incl. compile")
   print(E.format_table(res["metrics"], title))
-  if args.out:
-    out = {
-        "task": args.task, "policy": args.policy, "episodes": args.episodes, "seed": args.seed,
-        "fragility": args.fragility, "episode_length": res["episode_length"],
-        "command": "mjx-damage eval " + " ".join(sys.argv[1:] if argv is None else argv),
-        "metrics": res["metrics"], "wall_s": wall,
-    }
-    if args.per_episode:
-      out["per_episode"] = res["per_episode"]  # write_json turns numpy arrays into lists
-    write_json(args.out, out, indent=1)
-    print(f"wrote {args.out}")
+  result = {
+      "task": args.task, "policy": args.policy, "episodes": args.episodes, "seed": args.seed,
+      "fragility": args.fragility, "episode_length": res["episode_length"],
+      "command": "mjx-damage eval " + " ".join(sys.argv[1:] if argv is None else argv),
+      "metrics": res["metrics"], "wall_s": wall,
+  }
+  if args.per_episode:
+    result["per_episode"] = res["per_episode"]  # write_json turns numpy arrays into lists
+  write_json(out, result, indent=1)
+  print(f"outputs: {out}")
   return 0
 
 

@@ -6,7 +6,6 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -14,8 +13,12 @@ import time
 import jax
 
 from apps import resolve as R
+from mjx_damage import outputs
 from mjx_damage.io import write_json, write_text
 from train import sweep as S
+from train.cliargs import Parser
+
+COMPILE_S = {"cpu": 40, "gpu": 60}  # rough first compile of one task's evaluation, s
 
 
 def _split(field: str, text: str) -> list[str]:
@@ -26,16 +29,18 @@ def _split(field: str, text: str) -> list[str]:
 
 
 
-def build_parser() -> argparse.ArgumentParser:
-  ap = argparse.ArgumentParser(prog="mjx-damage sweep", description="tasks x policies x seeds x fragility sweep")
+def build_parser() -> Parser:
+  ap = Parser(prog="mjx-damage sweep", description="tasks x policies x seeds x fragility sweep")
   ap.add_argument("--tasks", required=True, help="comma-separated task names")
   ap.add_argument("--policies", default="scripted:safe,scripted:unsafe", help="comma-separated policy specs")
   ap.add_argument("--seeds", default="0", help="comma-separated seeds")
   ap.add_argument("--fragility", default="1", help="comma-separated fragility factors (> 0)")
   ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
-  ap.add_argument("--episode-length", type=int, default=None)
+  ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
-  ap.add_argument("--out", default="sweep.json", help="JSON path; the markdown table goes beside it (.md)")
+  ap.add_argument("--out", default=None, help="JSON path; the markdown table goes beside it (.md) "
+                  "(default: runs/sweep-<tasks>-<time>/sweep.json, a new folder)")
+  ap.add_argument("--overwrite", action="store_true", help="replace an existing --out (and its .md)")
   return ap
 
 
@@ -61,10 +66,19 @@ def main(argv=None) -> int:
       R.parse_policy_spec(p)
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
+    if args.out is not None:
+      outputs.check_new([args.out, os.path.splitext(args.out)[0] + ".md"], "--out", args.overwrite)
   except ValueError as e:
     ap.error(str(e))
+  out_path = args.out or os.path.join(outputs.run_dir("sweep", "+".join(tasks)), "sweep.json")
+  md_path = os.path.splitext(out_path)[0] + ".md"
+  platform = jax.default_backend()
+  print(f"sweep: tasks {', '.join(tasks)} x policies {', '.join(policies)} x seeds {seeds} x fragility {levels}, "
+        f"{args.episodes} episodes each, device {platform} x {jax.device_count()}; outputs {out_path}, {md_path}",
+        flush=True)
+  print(f"compiling, about {COMPILE_S.get(platform, 60)} s per task and policy the first time "
+        "(seconds once cached) ...", flush=True)
   t0 = time.perf_counter()
-  md_path = os.path.splitext(args.out)[0] + ".md"
 
   def write(res, complete):
     out = {
@@ -78,7 +92,7 @@ def main(argv=None) -> int:
         "wall_s": time.perf_counter() - t0, "complete": complete,
         "rows": res["rows"], "runs": res["runs"],
     }
-    write_json(args.out, out, indent=1)
+    write_json(out_path, out, indent=1)
     md = S.markdown(res["rows"], args.safe_threshold)
     head = f"Command: `{out['command']}`\n\nDevice: {out['device']} x {out['num_devices']}; wall {out['wall_s']:.0f} s"
     write_text(md_path, head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
@@ -88,7 +102,7 @@ def main(argv=None) -> int:
                 on_progress=lambda r: write(r, False), make_env=R.make_task, make_policy=R.make_policy,
                 episode_length_of=R.episode_length_of)
   print("\n" + write(res, True))
-  print(f"wrote {args.out} and {md_path}")
+  print(f"outputs: {out_path}, {md_path}")
   return 0
 
 

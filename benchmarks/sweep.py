@@ -36,7 +36,7 @@ def main(argv=None) -> int:
 
   out = os.path.join(HERE, "results", f"sweep_{args.device}.json")
   return sweep_cli.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"]
-                        + SETTINGS[args.device] + ["--out", out] + extra)
+                        + SETTINGS[args.device] + ["--out", out, "--overwrite"] + extra)
 
 
 if __name__ == "__main__":

@@ -59,7 +59,7 @@ def main(argv=None) -> int:
   out = os.path.join(HERE, "results", f"throughput_{args.device}.json")
   from apps import bench
 
-  return bench.main(SETTINGS[args.device] + ["--out", out] + extra)
+  return bench.main(SETTINGS[args.device] + ["--out", out, "--overwrite"] + extra)
 
 
 if __name__ == "__main__":

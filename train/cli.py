@@ -9,17 +9,34 @@ Examples::
 
 Every setting left out comes from ``--preset`` (playground: MuJoCo Playground's
 PandaPickCube recipe; paper: the oopsieverse appendix; legacy: this trainer's
-old defaults — train/config.py). Ctrl-C / SIGTERM writes a checkpoint and
-exits with status 130; ``--resume`` continues it exactly.
+old defaults — train/config.py). On a machine with no accelerator and no size
+flag (--num-envs, --timesteps, --batch-size, --num-minibatches) the run is
+shrunk to CPU_SIZE. Ctrl-C / SIGTERM writes a checkpoint and exits with
+status 130; ``--resume`` continues it exactly. An existing --out is refused
+unless --resume or --overwrite; without --out the run goes to a new
+runs/train-<task>-<time>/.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import math
+import os
 import sys
 
-from train.config import MULTIPLIERS, PRESETS
+from mjx_damage import outputs
+from train import checkpoint as ckpt
+from train.cliargs import Parser
+from train.config import MULTIPLIERS, PRESETS, PPOConfig
+
+# No accelerator and no size flag: a run sized to show learning curves on a laptop CPU, not to solve the task.
+CPU_SIZE = {"num_envs": 64, "num_timesteps": 50_000, "num_eval_envs": 16}
+CPU_SIZE_BATCHED = {"batch_size": 64, "num_minibatches": 4}  # presets that fix batch_size (playground)
+SIZE_FIELDS = ("num_envs", "num_timesteps", "batch_size", "num_minibatches")
+RUN_FILES = (ckpt.FILENAME, "config.json", "metrics.jsonl", "metrics.csv", "curves.png")
+COMPILE_S = {"cpu": 120, "gpu": 90}  # rough first compile of a task's training iteration, s
 
 
 def _int(text: str) -> int:
@@ -92,22 +109,38 @@ CONFIG_FLAGS = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-  p = argparse.ArgumentParser(prog="mjx-damage train", description=__doc__,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+def _preset_defaults(dest: str) -> str:
+  vals = {name: PPOConfig.preset(name).to_json()[dest] for name in PRESETS}
+  if len({json.dumps(v) for v in vals.values()}) == 1:
+    return f"(default: {_show(next(iter(vals.values())))})"
+  return "(default: " + ", ".join(f"{n} {_show(v)}" for n, v in vals.items()) + ")"
+
+
+def _show(v) -> str:
+  return ",".join(map(str, v)) if isinstance(v, list) else str(v)
+
+
+def build_parser() -> Parser:
+  p = Parser(prog="mjx-damage train", description=__doc__)
   p.add_argument("--task", required=True, help="registered task name, or package.module:EnvClass")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode=paper")
-  p.add_argument("--out", dest="out_dir", required=True, help="run directory (config, metrics, checkpoint, curves)")
+  p.add_argument("--out", dest="out_dir", default=None,
+                 help="run directory (config, metrics, checkpoint, curves) (default: runs/train-<task>-<time>/, a new folder)")
   p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.npz")
+  p.add_argument("--overwrite", action="store_true", help="replace the run in an existing --out")
   p.add_argument("--preset", default="playground", choices=sorted(PRESETS), help="base settings (train/config.py)")
-  p.add_argument("--seeds", type=_ints, default=None, help="seeds trained together in one program, e.g. 0,1,2,3,4")
-  p.add_argument("--seed", type=_int, default=None, help="one seed (same as --seeds N)")
-  p.add_argument("--episode-length", type=_int, default=None, help="default: the task's")
-  p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds")
-  p.add_argument("--no-progress", dest="progress", action="store_false")
+  p.add_argument("--seeds", type=_ints, default=None, help="seeds trained together in one program, e.g. 0,1,2,3,4 (default: 0)")
+  p.add_argument("--seed", type=_int, default=None, help="one seed (same as --seeds N) (default: 0)")
+  p.add_argument("--episode-length", type=_int, default=None, help="env steps (default: the task's)")
+  p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds (default: no limit)")
+  p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
   for flag, dest, typ, help_ in CONFIG_FLAGS:
-    p.add_argument(flag, dest=dest, type=typ, default=None, help=help_)
+    # default None = the preset's value, spelled out per preset (the formatter would only say None)
+    text = ((help_ + " ") if help_ else "") + _preset_defaults(dest)
+    if dest in ("num_envs", "num_timesteps"):
+      text += f"; CPU with no size flag: {CPU_SIZE[dest]}"
+    p.add_argument(flag, dest=dest, type=typ, default=argparse.SUPPRESS, help=text.replace("%", "%%"))
   return p
 
 
@@ -127,21 +160,96 @@ def _task_kwargs(items) -> dict:
 def split_args(args: dict) -> tuple[dict, dict]:
   """argparse namespace → (train() keywords, PPOConfig overrides given on the command line)."""
   fields = {dest for _, dest, _, _ in CONFIG_FLAGS}
-  config = {k: v for k, v in args.items() if k in fields and v is not None}
+  config = {k: v for k, v in args.items() if k in fields and v is not None}  # SUPPRESS: absent when not given
   rest = {k: v for k, v in args.items() if k not in fields}
   return rest, config
 
 
-def main(argv=None) -> int:
-  args, config = split_args(vars(build_parser().parse_args(argv)))
-  from train.ppo import train  # imports jax: keep --help fast
+def check_out(out_dir: str, task: str, resume: bool, overwrite: bool) -> None:
+  """The run directory: refuse an existing run unless --resume/--overwrite; --resume needs a checkpoint
+  of the same task. ``ValueError`` naming the flag."""
+  if resume and overwrite:
+    raise ValueError("--resume: give --resume or --overwrite, not both")
+  if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+    raise ValueError(f"--out: {out_dir} is a file, not a run directory")
+  if resume:
+    path = os.path.join(out_dir, ckpt.FILENAME)
+    if not os.path.isfile(path):
+      raise ValueError(f"--resume: no checkpoint at {path} (drop --resume to start a new run)")
+    old = ckpt.read_meta(path).get("task")
+    if old != task:
+      raise ValueError(f"--resume: the run in {out_dir} trained task {old!r}, not {task!r}")
+    return
+  outputs.check_new([out_dir], "--out", overwrite, resumable=True, folder=True)
 
-  task = args.pop("task")
-  try:
+
+def check_task(task: str) -> None:
+  """A registered task name, or ``package.module:EnvClass`` (imported later, by train)."""
+  if ":" in task:
+    module, _, cls = task.partition(":")
+    if not module or not cls:
+      raise ValueError(f"--task: expected a task name or package.module:EnvClass, got {task!r}")
+    return
+  import tasks  # the registry (loads JAX, compiles nothing)
+
+  if task not in tasks.names():
+    raise ValueError(f"--task: unknown task {task!r} (valid: {', '.join(tasks.names())}, or package.module:EnvClass)")
+
+
+def cpu_size(config: dict, preset: str) -> dict:
+  """Sizes for a machine with no accelerator when the user gave none (CPU_SIZE); {} otherwise."""
+  if any(k in config for k in SIZE_FIELDS):
+    return {}
+  return {**CPU_SIZE, **(CPU_SIZE_BATCHED if PRESETS[preset].get("batch_size") is not None else {})}
+
+
+def main(argv=None) -> int:
+  p = build_parser()
+  args, config = split_args(vars(p.parse_args(argv)))
+  task, overwrite = args.pop("task"), args.pop("overwrite")
+  try:  # everything the user typed is checked here, before JAX starts
     args["task_kwargs"] = _task_kwargs(args.pop("task_arg")) or None
+    check_task(task)
+    if args["time_limit"] is not None and not (math.isfinite(args["time_limit"]) and args["time_limit"] > 0):
+      raise ValueError(f"--time-limit: must be a number of seconds > 0, got {args['time_limit']}")
+    if args["episode_length"] is not None and args["episode_length"] < 1:
+      raise ValueError(f"--episode-length: must be >= 1, got {args['episode_length']}")
+    if args["seeds"] is not None and args["seed"] is not None:
+      raise ValueError("--seeds: give --seeds or --seed, not both")
+    seeds = args["seeds"] or ((args["seed"],) if args["seed"] is not None else (0,))
+    cfg = PPOConfig.preset(args["preset"], seeds=seeds, episode_length=args["episode_length"] or 1,
+                           **config).validate()
+    if args["out_dir"] is None:
+      if args["resume"]:
+        raise ValueError("--resume: needs --out (the run directory to continue)")
+      args["out_dir"] = outputs.run_dir("train", task.rpartition(":")[2] or task)
+    check_out(args["out_dir"], task, args["resume"], overwrite)
+  except ValueError as e:  # one line, status 2, as argparse's own errors (returned: callers test the status)
+    print(f"{p.prog}: error: {' '.join(str(e).split())}", file=sys.stderr)
+    return 2
+
+  import jax  # after the checks: keeps --help and user errors fast
+
+  from train.ppo import train
+  platform = jax.default_backend()
+  small = cpu_size(config, args["preset"]) if platform == "cpu" else {}
+  if small:
+    config.update(small)
+    cfg = dataclasses.replace(cfg, **small).validate()
+  if overwrite:
+    for name in RUN_FILES:  # only the files a run writes: --out may be a folder with other things in it
+      path = os.path.join(args["out_dir"], name)
+      if os.path.isfile(path):
+        os.remove(path)
+  size = (" (no accelerator: CPU size; give --num-envs/--timesteps for more)" if small else "")
+  print(f"train: task {task}, preset {args['preset']}, {cfg.num_envs} envs x {cfg.num_timesteps:,} env steps "
+        f"per seed{size}, seeds {list(cfg.seeds)}, device {platform} x {jax.device_count()}; "
+        f"run directory {args['out_dir']}{' (resuming)' if args['resume'] else ''}", flush=True)
+  print(f"compiling, about {COMPILE_S.get(platform, 90)} s the first time (less once cached) ...", flush=True)
+  try:
     result = train(task, **args, **config)
   except ValueError as e:
-    print(f"mjx-damage train: error: {e}", file=sys.stderr)
+    print(f"mjx-damage train: error: {' '.join(str(e).split())}", file=sys.stderr)
     return 2
   summary = {
       "out_dir": result.out_dir, "seeds": list(result.config.seeds), "env_steps_per_seed": result.env_steps,
@@ -149,6 +257,7 @@ def main(argv=None) -> int:
       "final_eval": {str(s): ev for s, ev in zip(result.config.seeds, result.final_evals)},
   }
   print(json.dumps(summary, indent=1))
+  print(f"outputs: {result.out_dir} (config.json, metrics.jsonl, metrics.csv, checkpoint.npz, curves.png)")
   return 0
 
 

@@ -254,8 +254,9 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       if stop.signal is not None:
         if bar is not None:
           bar.close()
-        print(f"train: signal {stop.signal}: checkpoint at iteration {iteration} "
-              f"{'in ' + ckpt_path if ckpt_path else '(no out_dir: nothing saved)'}", file=sys.stderr)
+        kept = (f"checkpoint at iteration {iteration} in {ckpt_path} (continue with --resume)" if ckpt_path
+                else "nothing saved (no out_dir)")
+        print(f"interrupted (signal {stop.signal}); {kept}", file=sys.stderr)
         raise SystemExit(INTERRUPTED)
       if last:
         break

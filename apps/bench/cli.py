@@ -23,7 +23,6 @@ wraps this with the committed settings per device.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -36,8 +35,9 @@ import mujoco
 import tasks
 from apps.bench.measure import batched_initial_state, measure_pair, measure_task
 from apps.bench.report import save, summarize
-from mjx_damage import reference
+from mjx_damage import outputs, reference
 from tasks.bench_table import JACOBIANS, pusher_ctrl, table_env
+from train.cliargs import Parser
 
 CPU_ENVS = (1, 16, 128, 1024, 2048)
 GPU_ENVS = (1, 256, 2048, 8192, 16384)
@@ -194,8 +194,8 @@ def run_benchmark(args) -> dict:
   return result
 
 
-def build_parser() -> argparse.ArgumentParser:
-  ap = argparse.ArgumentParser(prog="mjx-damage bench", description=__doc__.split("\n\n")[0])
+def build_parser() -> Parser:
+  ap = Parser(prog="mjx-damage bench", description=__doc__.split("\n\n")[0])
   ap.add_argument("--envs", default=None, help="comma-separated batch sizes (default: CPU 1..2048, GPU 1..16384)")
   ap.add_argument("--entities", default=",".join(map(str, ENTITIES)), help="tracked-entity counts K")
   ap.add_argument("--k", type=int, default=32, help="boxes (all tracked) for the vs-envs curve and in the fixed"
@@ -206,7 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
                   help="entity counts K of scenes with 1 free box and K-1 mounted boxes, all tracked ('' to skip)")
   ap.add_argument("--jacobian", default="auto", choices=JACOBIANS,
                   help="MuJoCo <option jacobian> of the bench scene (auto: MJX goes sparse from nv >= 60)")
-  ap.add_argument("--entity-envs", type=int, default=None, help="batch of the vs-entities curve")
+  ap.add_argument("--entity-envs", type=int, default=None, help="batch of the vs-entities curve (default: CPU 1024, GPU 8192)")
   ap.add_argument("--ratio-envs", type=int, default=None, help="batch of the on/off ratio (CPU 1024, GPU 8192)")
   ap.add_argument("--substeps", type=int, default=5, help="physics steps per env step (default 5)")
   ap.add_argument("--target-s", type=float, default=2.0, help="seconds each timed run aims for")
@@ -219,7 +219,9 @@ def build_parser() -> argparse.ArgumentParser:
   ap.add_argument("--task-envs", type=int, default=None, help="batch for the task (CPU 256, GPU 32768)")
   ap.add_argument("--budget-s", type=float, default=540.0, help="stop starting measurements after this long")
   ap.add_argument("--note", dest="notes", action="append", default=[], help="free text stored in the JSON")
-  ap.add_argument("--out", default="bench.json", help="JSON path (the PNG goes beside it)")
+  ap.add_argument("--out", default=None, help="JSON path (the .md and .png go beside it) "
+                  "(default: runs/bench-<time>/bench.json, a new folder)")
+  ap.add_argument("--overwrite", action="store_true", help="replace an existing --out (and its .md, .png)")
   return ap
 
 
@@ -246,16 +248,29 @@ def main(argv=None) -> int:
                  "repeats"):
       if getattr(args, name) < 1:
         raise ValueError(f"--{name.replace('_', '-')}: must be >= 1, got {getattr(args, name)}")
+    if not args.budget_s > 0 or not args.target_s > 0 or not args.ref_max_s > 0:
+      bad = next(n for n in ("budget_s", "target_s", "ref_max_s") if not getattr(args, n) > 0)
+      raise ValueError(f"--{bad.replace('_', '-')}: must be a number of seconds > 0, got {getattr(args, bad)}")
+    if args.task and args.task not in tasks.names():
+      raise ValueError(f"--task: unknown task {args.task!r} (valid: {', '.join(tasks.names())}, or '' to skip)")
+    if args.out is not None:
+      base = os.path.splitext(args.out)[0]
+      outputs.check_new([args.out, base + ".md", base + ".png"], "--out", args.overwrite)
     if args.ratio_envs not in envs:
       envs.append(args.ratio_envs)
       args.envs = ",".join(map(str, sorted(envs)))
   except ValueError as e:
     ap.error(str(e))
-  print(f"mjx-damage bench on {jax.devices()[0].device_kind} ({jax.device_count()} device(s))", flush=True)
+  args.out = args.out or os.path.join(outputs.run_dir("bench"), "bench.json")
+  print(f"bench: K={args.k} boxes, envs {args.envs}, entities {args.entities}, task {args.task or '-'}, "
+        f"budget {args.budget_s:g} s, device {jax.devices()[0].device_kind} x {jax.device_count()}; "
+        f"outputs {args.out} (+ .md, .png)", flush=True)
+  print("compiling each configuration as it comes, about 10-60 s each the first time (seconds once cached) ...",
+        flush=True)
   result = run_benchmark(args)  # saves JSON/MD/PNG after every point and at the end
   png = os.path.splitext(args.out)[0] + ".png"
   print(json.dumps(result["summary"], indent=1))
-  print(f"wrote {args.out} and {png}")
+  print(f"outputs: {args.out}, {os.path.splitext(args.out)[0] + '.md'}, {png}")
   return 0
 
 

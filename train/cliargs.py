@@ -1,0 +1,42 @@
+"""Command-line parsing every ``mjx-damage`` command shares: one-line errors, defaults shown in ``--help``.
+
+argparse's own error path prints the whole usage block before the message;
+a user who typed one wrong value should read one line naming the flag, and
+the exit status 2 a shell script can test. ``--help`` shows every default
+(``ArgumentDefaultsHelpFormatter``) while keeping hand-wrapped descriptions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+  """``(default: X)`` after every option that has a default its help does not already state;
+  descriptions printed as written."""
+
+  def _get_help_string(self, action):
+    text = action.help or ""
+    if ("(default" in text or action.default in (None, argparse.SUPPRESS) or action.required
+        or not action.option_strings or action.nargs == 0):
+      return text
+    return (text + " " if text else "") + "(default: %(default)s)"
+
+
+class Parser(argparse.ArgumentParser):
+  """``ArgumentParser`` whose errors are one line, ``<prog>: error: <message>``, exit status 2."""
+
+  def __init__(self, *args, **kwargs):
+    kwargs.setdefault("formatter_class", HelpFormatter)
+    super().__init__(*args, **kwargs)
+
+  def add_argument(self, *args, **kwargs):
+    action = super().add_argument(*args, **kwargs)
+    if not action.help and action.default not in (None, argparse.SUPPRESS) and action.nargs != 0:
+      action.help = "(default: %(default)s)"  # argparse prints no help line at all for an empty help
+    return action
+
+  def error(self, message: str):
+    print(f"{self.prog}: error: {' '.join(str(message).split())}", file=sys.stderr)
+    sys.exit(2)
