@@ -1,29 +1,36 @@
 """``mjx-damage render``: a task's rollout as a video, damaged links tinted, health bars (:mod:`mjx_damage.render`).
 
     mjx-damage render --task place_plate --policy scripted:unsafe --out rollout.mp4 [--plots DIR]
+
+Without ``--out`` the video goes to a new ``runs/render-<task>-<time>/rollout.mp4``; an
+existing video (or ``--plots`` folder) is refused unless ``--overwrite`` is given.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
 
 from apps import resolve as R
 from apps import training_log
-from mjx_damage import plots, video
+from mjx_damage import outputs, plots, video
 from mjx_damage.gl import ensure_gl
-from mjx_damage.render import camera_of, render_rollout
+from mjx_damage.render import camera_of, env_path, render_rollout
 from mjx_damage.trajectory import mj_model_of, positive_int
+from train.cliargs import Parser
+
+COMPILE_S = {"cpu": 60, "gpu": 60}  # rough first compile of a task's rollout + render set-up, s
 
 
-def build_parser() -> argparse.ArgumentParser:
-  ap = argparse.ArgumentParser(
+def build_parser() -> Parser:
+  ap = Parser(
       prog="mjx-damage render",
       description="Render a rollout: damaged links tinted red, health bars for every tracked entity.")
   R.add_task_policy_arguments(ap)
-  ap.add_argument("--out", required=True, help="output video, .mp4 or .gif")
+  ap.add_argument("--out", default=None,
+                  help="output video, .mp4 or .gif (default: runs/render-<task>-<time>/rollout.mp4)")
+  ap.add_argument("--overwrite", action="store_true", help="replace an existing --out video / --plots folder")
   ap.add_argument("--steps", type=int, default=None, help="control steps (default: the task's episode length)")
   ap.add_argument("--seed", type=int, default=0)
   ap.add_argument("--num-envs", type=int, default=1, help="environments run together; env b>0 → <out>_env<b>")
@@ -45,7 +52,12 @@ def main(argv=None) -> int:
   try:  # everything the user gave is checked before a task is built or compiled
     R.check_task(args.task)
     kind, _ = R.parse_policy_spec(args.policy)
-    video.check_out(args.out)
+    if args.out is not None:
+      video.check_out(args.out)
+      outputs.check_new([env_path(args.out, b, args.num_envs) for b in range(max(args.num_envs, 1))],
+                        "--out", args.overwrite)
+    if args.plots is not None:
+      outputs.check_new([args.plots], "--plots", args.overwrite, folder=True)
     for name in ("num_envs", "width", "height"):
       positive_int(name, getattr(args, name))
     if args.steps is not None:
@@ -64,13 +76,20 @@ def main(argv=None) -> int:
       camera_of(mj_model_of(env), None, args.camera, [])
   except ValueError as e:
     ap.error(str(e))
+  out = args.out or os.path.join(outputs.run_dir("render", args.task), "rollout.mp4")
   try:
     ensure_gl()
   except RuntimeError as e:
     print(f"mjx-damage render: {e}", file=sys.stderr)
     return 1
+  import jax
+
+  platform = jax.default_backend()
+  print(f"render: task {args.task}, policy {args.policy}, {args.num_envs} env(s) x {steps} steps, "
+        f"{args.width}x{args.height}, seed {args.seed}, device {platform}; output {out}", flush=True)
+  print(f"compiling, about {COMPILE_S.get(platform, 60)} s the first time (seconds once cached) ...", flush=True)
   t0 = time.perf_counter()
-  res = render_rollout(env, policy, steps=steps, seed=args.seed, out=args.out, width=args.width,
+  res = render_rollout(env, policy, steps=steps, seed=args.seed, out=out, width=args.width,
                        height=args.height, camera=args.camera, fps=args.fps, num_envs=args.num_envs)
   traj = res.trajectory
   final = traj.entity_health[-1]
@@ -86,7 +105,9 @@ def main(argv=None) -> int:
     for p in written:
       print(f"wrote {p}")
   print(f"({time.perf_counter() - t0:.1f} s incl. compile)")
+  print("outputs: " + ", ".join(list(res.paths) + ([args.plots] if args.plots else [])))
   return 0
+
 
 
 if __name__ == "__main__":

@@ -253,7 +253,8 @@ def _body_of_links(model, traj):
   return out
 
 
-def _env_path(out: str, b: int, num_envs: int) -> str:
+def env_path(out: str, b: int, num_envs: int) -> str:
+  """The file env ``b`` of ``num_envs`` is written to: ``out`` for env 0, ``<root>_env<b><ext>`` after."""
   if num_envs == 1 or b == 0:
     return out
   root, ext = os.path.splitext(out)
@@ -310,5 +311,5 @@ def render_rollout(env, policy: Callable, *, steps: int, seed: int = 0, out: Opt
                       overlay=overlay, tint=tint, particles=particles)
     frames.append(f)
     if out is not None:
-      paths.append(write_video(f, _env_path(os.fspath(out), b, num_envs), fps))
+      paths.append(write_video(f, env_path(os.fspath(out), b, num_envs), fps))
   return RenderResult(frames=frames, paths=paths, trajectory=traj)

@@ -33,6 +33,7 @@ _SCENE = os.path.join(os.path.dirname(__file__), "scenes", "heat.xml")
 
 
 def _prepare(tmp) -> None:
+  open(os.path.join(tmp, "exists.mp4"), "wb").close()
   with open(os.path.join(tmp, "exists.json"), "w") as f:
     f.write("{}\n")
   os.makedirs(os.path.join(tmp, "run"))
@@ -122,6 +123,10 @@ CLI_CASES = [
     (["eval", "--task", "drop", "--policy", "zero", "--out", "{tmp}/afile/result.json"], "--out"),
     (["eval", "--task", "drop", "--policy", "zero", "--out", "{tmp}/run"], "folder"),
     (["eval", "--task", "drop"], "--policy"),
+    (["render", "--task", "no_such_task", "--policy", "zero"], "task"),
+    (["render", "--task", "drop", "--policy", "zero", "--out", "{tmp}/exists.mp4"], "--overwrite"),
+    (["render", "--task", "drop", "--policy", "zero", "--out", "{tmp}/v.avi"], "out"),
+    (["render", "--task", "drop", "--policy", "zero", "--num-envs", "0"], "num_envs"),
     (["sweep", "--tasks", "drop,no_such_task", "--policies", "zero"], "task"),
     (["sweep", "--tasks", "drop", "--policies", "zero,bogus"], "policy"),
     (["sweep", "--tasks", "drop", "--policies", "zero", "--seeds", "a"], "seeds"),
