@@ -8,7 +8,10 @@
    ``--steps`` control steps of uniform random actions (each held 10 steps) for
    ``panda`` and ``panda_wrist``; worst excess of any joint beyond its range over
    every physics substep, and whether the state stayed finite. Target: ≤ 0.01 rad.
-3. **Scripted policies with the Panda** (``--tasks``, default place_plate):
+3. **Compile time of one task step** (``--tasks``): ``jit(vmap(env.step))`` over 8
+   envs, lowered and compiled from scratch (persistent cache off), Panda vs gripper;
+   the 1-minute load average is recorded beside it (the CPU is shared).
+4. **Scripted policies with the Panda** (``--tasks``, default place_plate):
    ``--episodes`` episodes of each scripted style through ``tasks.rollout``;
    completion % and safe completion % (completed, every entity's final health > 95),
    plus the first-compile time of the batched rollout.
@@ -33,6 +36,9 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+
+# First-compile times are only meaningful without the persistent cache: switch it off here.
+jax.config.update("jax_enable_compilation_cache", False)
 
 import tasks  # noqa: E402
 from mjx_damage import io  # noqa: E402
@@ -90,6 +96,16 @@ def scripted(task: str, episodes: int, seed: int) -> dict:
   return res
 
 
+def step_compile(task: str, robot: str, n: int = 8) -> dict:
+  env = tasks.make(task, robot=robot)
+  state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), n))
+  act = jnp.zeros((n, env.action_size))
+  load = os.getloadavg()[0]
+  t0 = time.perf_counter()
+  jax.jit(jax.vmap(env.step)).lower(state, act).compile()
+  return {"task": task, "robot": robot, "envs": n, "step_compile_s": time.perf_counter() - t0, "loadavg_1min": load}
+
+
 def main():
   ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   ap.add_argument("--envs", type=int, default=20)
@@ -112,6 +128,8 @@ def main():
   print("figure-eight:", res["figure_eight"], flush=True)
   res["joint_limits"] = [joint_limits(r, args.envs, args.steps, args.seed) for r in ("panda", "panda_wrist")]
   print("joint limits:", res["joint_limits"], flush=True)
+  res["step_compile"] = [step_compile(t, r) for t in names for r in ("panda", "gripper")]
+  print("step compile:", res["step_compile"], flush=True)
   res["scripted"] = [scripted(t, args.episodes, args.seed) for t in names] if args.episodes else []
   for r in res["scripted"]:
     print("scripted:", r, flush=True)
