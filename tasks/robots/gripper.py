@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from tasks.robots.interface import MAX_STEP, Robot, sanitize
+from tasks.robots.interface import FINGER_HALF_THICK, MAX_STEP, Robot, sanitize
 
 Q_MIN = 0.007  # m, finger half-opening at gripper = −1 (2 mm gap between the pads)
 Q_MAX = 0.086  # m, finger half-opening at gripper = +1 (16 cm gap)
@@ -59,6 +59,15 @@ class Gripper(Robot):
 
   def finger_q(self, d):
     return d.qpos[3:5], d.qvel[3:5]
+
+  def proprio(self, d) -> jax.Array:
+    return jnp.concatenate([
+        d.qpos[0:3], d.qvel[0:3],
+        2.0 * (0.5 * (d.qpos[3:4] + d.qpos[4:5]) - FINGER_HALF_THICK), d.qvel[3:4] + d.qvel[4:5],
+    ])
+
+  def gap(self, d) -> jax.Array:
+    return 2.0 * (0.5 * (d.qpos[3] + d.qpos[4]) - FINGER_HALF_THICK)
 
   def finger_ctrl(self, a) -> jax.Array:
     q = Q_MIN + 0.5 * (a + 1.0) * (Q_MAX - Q_MIN)
