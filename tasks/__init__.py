@@ -5,6 +5,7 @@ API (evaluation, training and rendering build on exactly this)::
     import tasks
     tasks.names()                          # ['open_drawer', 'pick_egg', ...]
     env = tasks.make("place_plate", damage_weight=2.0, obs_mode="paper")
+    env = tasks.make("place_plate", robot="panda")   # Franka Panda instead of the floating gripper
     state = jax.jit(env.reset)(jax.random.PRNGKey(0))
     state = jax.jit(env.step)(state, action)          # action f32[4] in [-1, 1]
     policy = tasks.scripted_policy(env, "safe")       # policy(state, rng) -> action, one env
@@ -15,7 +16,10 @@ API (evaluation, training and rendering build on exactly this)::
 (``damage_weight``, ``terminate_on_destroyed``, ``health_in_obs``, ``params_fn``,
 ``safe_threshold``) plus the task's constructor knobs (``episode_length``,
 ``n_substeps``, ``obs_mode``, ``terminate_on_success``, ``success_bonus`` and
-task-specific ones); anything else raises ``ValueError`` listing the valid ones.
+task-specific ones) and ``robot`` (:func:`tasks.robots.names`: ``"gripper"`` — the
+default for now, every task's scripted policies are tuned on it — ``"panda"``, or
+``"panda_wrist"`` with the 7-D action); anything else raises ``ValueError``
+listing the valid ones.
 
 Adding a task: a module ``tasks/<name>.py`` with a :class:`tasks.base.Task`
 subclass, its scene XML beside it, and one line in ``_REGISTRY`` below.
@@ -27,6 +31,7 @@ import importlib
 import inspect
 
 from mjx_damage.wrapper import DamageWrapper
+from tasks import robots
 
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
@@ -86,6 +91,7 @@ def default_config(name: str) -> dict:
   cls = task_class(name)
   cfg = {k: v for k, (_, v) in _WRAPPER_OPTIONS.items()}
   cfg.update(_task_options(cls))
+  cfg["robot"] = robots.DEFAULT
   return cfg
 
 
@@ -101,9 +107,14 @@ def make(name: str, **overrides):
   for k in overrides:
     if k not in valid:
       raise ValueError(f"{k}: unknown override for task {name!r}; valid: {', '.join(sorted(valid))}")
+  robot = overrides.get("robot", robots.DEFAULT)
+  robots.robot_class(robot)  # unknown names raise here, before anything compiles
   wrapper_kw = {_WRAPPER_OPTIONS[k][0]: overrides.get(k, v) for k, (_, v) in _WRAPPER_OPTIONS.items()}
-  task_kw = {k: v for k, v in overrides.items() if k not in _WRAPPER_OPTIONS}
-  env = cls(**task_kw)
+  task_kw = {k: v for k, v in overrides.items() if k not in _WRAPPER_OPTIONS and k != "robot"}
+  # the robot is chosen per instance before the task's constructor runs (constructors take no robot)
+  env = cls.__new__(cls)
+  env.robot_name = robot
+  env.__init__(**task_kw)
   return DamageWrapper(env, **wrapper_kw)
 
 

@@ -1,7 +1,8 @@
-"""Base class of the task suite: one MJCF scene + the gripper robot + damage at every substep.
+"""Base class of the task suite: one MJCF scene + a robot + damage at every substep.
 
 A task is one Python file with a :class:`Task` subclass and its scene XML beside
-it (which includes ``robot.xml`` first). A subclass declares, as class
+it (which includes ``robot.xml`` first: that name stands for the chosen robot's
+MJCF, :mod:`tasks.robots`). A subclass declares, as class
 attributes, ``name``, ``xml`` (file name beside the module), ``entities``
 (damage config entities other than the agent, DAMAGE_MODEL.md §5 names) and
 ``workspace`` (box the grip point may be commanded into), and implements:
@@ -12,15 +13,21 @@ attributes, ``name``, ``xml`` (file name beside the module), ``entities``
 * ``evaluate(d, info) -> (reward f32[], success f32[], extra_metrics dict)`` —
   dense task reward and the success condition (1.0 while it holds);
 * ``policy(style) -> policy(state, rng) -> action`` for ``style in ("safe", "unsafe")``;
-* optional: ``obs_modes`` + ``mode_obs`` (extra observation layouts, e.g. the
+* optional: ``robot_mounts`` (robot name → base pose (x, y, z, yaw) for fixed-base
+  arms; default: the robot's ``DEFAULT_MOUNT``), ``obs_modes`` + ``mode_obs`` (extra observation layouts, e.g. the
   paper's 6-D one), ``update_info(d, info) -> info`` (task state that evolves,
   e.g. which dirt is wiped; called after every control step), ``setup(mj_model)``.
+
+Robot: ``self.robot`` (:class:`tasks.robots.interface.Robot`), chosen by
+``tasks.make(name, robot=...)`` (default ``gripper``). Every task method runs
+with that robot active for the class-level readers of :mod:`tasks.robot`
+(``R.Robot.eef_pos(d)`` …), so task code is the same for every robot.
 
 Everything in ``reset``/``step`` is a pure function of (rng / state, action):
 jit and vmap them. The environment's ``State``:
 
 * ``pipeline_state`` — ``mjx.Data``;
-* ``obs`` — ``[robot proprio (8); task_obs]`` (``obs_mode="full"``) or a task layout;
+* ``obs`` — ``[robot proprio (8 gripper, 15 panda); task_obs]`` (``obs_mode="full"``) or a task layout;
 * ``reward`` — dense task reward (the damage wrapper subtracts w·cost);
 * ``done`` — 1.0 on success when ``terminate_on_success`` (episode length is the
   training wrapper's business: Brax's ``EpisodeWrapper(episode_length)``);
@@ -32,6 +39,7 @@ jit and vmap them. The environment's ``State``:
 from __future__ import annotations
 
 import abc
+import functools
 import os
 from typing import Callable, ClassVar
 
@@ -44,12 +52,42 @@ from mujoco import mjx
 
 from mjx_damage.env import DamageEnv
 from tasks import robot as R
+from tasks import robots
 
 Policy = Callable[[State, jax.Array], jax.Array]
 
+# Task methods that run with the task's robot active (tasks.robot.Robot reads it while tracing).
+_ROBOT_SCOPED = ("sample_init", "task_obs", "evaluate", "mode_obs", "update_info", "reset", "step", "observe")
+
+
+def _scoped(fn):
+  @functools.wraps(fn)
+  def wrapped(self, *args, **kwargs):
+    with R.active(self.robot):
+      return fn(self, *args, **kwargs)
+  return wrapped
+
+
+def _scoped_policy(factory):
+  @functools.wraps(factory)
+  def wrapped(self, style):
+    robot = self.robot
+    with R.active(robot):
+      act = factory(self, style)
+
+    @functools.wraps(act)
+    def scoped_act(state, rng):
+      with R.active(robot):
+        return act(state, rng)
+    return scoped_act
+  return wrapped
+
 
 class Task(DamageEnv):
-  """A household manipulation task for the gripper robot, damage tracked per substep.
+  """A household manipulation task for one robot of :mod:`tasks.robots`, damage tracked per substep.
+
+  The robot is ``self.robot_name`` (class default ``robots.DEFAULT``; :func:`tasks.make` sets it per
+  instance before ``__init__`` runs, so task constructors need no robot argument).
 
   Args:
     episode_length: default number of control steps of an episode (used by the
@@ -66,6 +104,16 @@ class Task(DamageEnv):
   workspace: ClassVar[tuple] = ((-0.4, -0.4, 0.0), (0.4, 0.4, 0.4))
   default_episode_length: ClassVar[int] = 150
   obs_modes: ClassVar[tuple[str, ...]] = ("full",)
+  robot_name: ClassVar[str] = robots.DEFAULT
+  robot_mounts: ClassVar[dict] = {}
+
+  def __init_subclass__(cls, **kwargs):
+    super().__init_subclass__(**kwargs)
+    for name in _ROBOT_SCOPED:
+      if name in cls.__dict__:
+        setattr(cls, name, _scoped(cls.__dict__[name]))
+    if "policy" in cls.__dict__:
+      cls.policy = _scoped_policy(cls.__dict__["policy"])
 
   def __init__(
       self,
@@ -83,16 +131,19 @@ class Task(DamageEnv):
       raise ValueError(f"obs_mode: unknown {obs_mode!r}; valid: {', '.join(self.obs_modes)}")
     if isinstance(success_bonus, bool) or not isinstance(success_bonus, (int, float)) or not np.isfinite(success_bonus):
       raise ValueError(f"success_bonus: must be a finite number, got {success_bonus!r}")
-    path = os.path.join(os.path.dirname(__import__(type(self).__module__, fromlist=["_"]).__file__), self.xml)
-    mj_model = mujoco.MjModel.from_xml_path(path)
-    super().__init__(mj_model, self.damage_config(), n_substeps)
-    self.robot = R.Robot(mj_model)
+    robot_cls = robots.robot_class(self.robot_name)
+    mj_model = self.load_scene(robot_cls)
+    if robot_cls.default_mount is not None:
+      robot_cls.place(mj_model, self.robot_mounts.get(robot_cls.name, robot_cls.default_mount))
+    cfg = self.damage_config()
+    cfg["entities"]["agent"] = robot_cls.agent_entity()
+    super().__init__(mj_model, cfg, n_substeps)
+    self.robot = robot_cls(mj_model, float(mj_model.opt.timestep) * n_substeps)
     self.episode_length = episode_length
     self.obs_mode = obs_mode
     self.terminate_on_success = bool(terminate_on_success)
     self.success_bonus = float(success_bonus)
-    self.ws_lo = np.asarray(self.workspace[0], np.float32)
-    self.ws_hi = np.asarray(self.workspace[1], np.float32)
+    self.ws_lo, self.ws_hi = self.robot.workspace(*self.workspace)
     self.setup(mj_model)
     d0 = jax.eval_shape(lambda: mjx.make_data(self.sys))
     info0 = jax.eval_shape(lambda r: self.sample_init(r, jnp.zeros(mj_model.nq))[1], jax.random.PRNGKey(0))
@@ -101,8 +152,18 @@ class Task(DamageEnv):
   # -- configuration hooks -------------------------------------------------------
   @classmethod
   def damage_config(cls) -> dict:
-    """The damage config: the task's entities plus the robot as ``agent``."""
+    """The damage config: the task's entities plus the robot as ``agent`` (the gripper's bodies here;
+    ``__init__`` puts the chosen robot's bodies in)."""
     return {"entities": {**cls.entities, "agent": dict(R.AGENT_ENTITY)}}
+
+  def load_scene(self, robot_cls) -> mujoco.MjModel:
+    """Compile the task's scene XML with ``robot.xml`` resolved to ``robot_cls``'s MJCF."""
+    path = os.path.join(os.path.dirname(__import__(type(self).__module__, fromlist=["_"]).__file__), self.xml)
+    with open(path) as f:
+      text = f.read()
+    with open(robot_cls.xml, "rb") as f:
+      robot_xml = f.read()
+    return mujoco.MjModel.from_xml_string(text, {"robot.xml": robot_xml})
 
   def setup(self, m: mujoco.MjModel) -> None:
     """Look up static indices in the compiled model (called once in ``__init__``)."""
@@ -139,13 +200,15 @@ class Task(DamageEnv):
 
   @property
   def action_size(self) -> int:
-    return R.ACTION_SIZE
+    return self.robot.action_size
 
+  @_scoped
   def observe(self, d: mjx.Data, info: dict) -> jax.Array:
     if self.obs_mode == "full":
       return jnp.concatenate([self.robot.proprio(d), self.task_obs(d, info)])
     return self.mode_obs(self.obs_mode, d, info)
 
+  @_scoped
   def reset(self, rng: jax.Array) -> State:
     r_init, r_dmg = jax.random.split(rng)
     d = mjx.make_data(self.sys)
@@ -158,6 +221,7 @@ class Task(DamageEnv):
     metrics = {"success": success.astype(jnp.float32), **extra}
     return State(d, self.observe(d, info), z, z, metrics, info)
 
+  @_scoped
   def step(self, state: State, action: jax.Array) -> State:
     d0 = state.pipeline_state
     ctrl = self.robot.ctrl(d0, action, self.ws_lo, self.ws_hi)

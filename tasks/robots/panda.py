@@ -1,0 +1,285 @@
+"""Franka Emika Panda on a fixed base (``panda.xml``) with a differential-IK controller.
+
+Joints: ``qpos[0:7]`` the arm (``panda_joint1..7``), ``qpos[7:9]`` the finger
+half-openings (pad centre offset, 0.006–0.046 m: 0–8 cm between the pads).
+Actuators: position servos ``[j1, j2, j3, finger_l, finger_r, j4, j5, j6, j7]``
+(fingers at ctrl[3:5], the suite's convention — see ``interface.py``).
+
+Control, once per control step inside the jitted step (:meth:`Panda.ctrl`):
+
+1. forward kinematics of the arm in pure JAX from the same modified-DH table the
+   MJCF is written from (:func:`fk`: grip point, hand rotation, geometric
+   Jacobian f32[6, 7]); no MuJoCo call, so it costs a few hundred flops;
+2. task error ``e = [target − p; w·rot_err(R, R_des)]`` with the position target
+   ``p + a[0:3]·MAX_STEP`` (clipped to the workspace) and the hand orientation
+   held at ``R_des`` = pointing down, fingers along world y (the gripper's
+   finger axis) — or, for :class:`PandaWrist`, turned by ``a[3:6]·MAX_ROT``;
+3. damped least squares ``Δq = Jᵀ(JJᵀ + λ²I)⁻¹e`` plus a nullspace pull toward
+   the ready posture ``(I − J⁺J)·k·(q_ready − q)`` (elbow up, away from limits);
+4. ``Δq`` scaled down uniformly so no joint exceeds its rated velocity over the
+   control period, then ``q + Δq`` clipped to the joint range minus a margin;
+5. ``q + Δq`` goes to the joint position servos (gains in ``panda.xml``), which run
+   at the physics rate; gravity compensation goes through the actuators so the
+   real torque limits (87 / 12 N·m) bound servo + gravity torque together.
+
+Damage: every arm link, the hand and both fingers are links of entity ``agent``.
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+
+from tasks.robots.interface import MAX_STEP, Robot, sanitize
+
+# Franka's modified-DH table (a m, d m, α rad) for joints 1–7; panda.xml is written from it.
+DH = np.array([
+    [0.0, 0.333, 0.0],
+    [0.0, 0.0, -np.pi / 2],
+    [0.0, 0.316, np.pi / 2],
+    [0.0825, 0.0, np.pi / 2],
+    [-0.0825, 0.384, -np.pi / 2],
+    [0.0, 0.0, np.pi / 2],
+    [0.088, 0.0, np.pi / 2],
+])
+FLANGE_D = 0.107  # m, joint-7 frame to flange
+HAND_YAW = -np.pi / 4  # rad, Franka Hand mounting rotation about the flange axis
+GRIP_OFFSET = 0.1134  # m, flange to the fingertips' lower end (grip point), panda.xml site panda_grip
+Q_LO = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+Q_HI = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+V_MAX = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s, rated joint velocity
+Q_READY = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4])
+R_DOWN = np.diag([1.0, -1.0, -1.0])  # hand z down, hand y (finger axis) along world y
+
+DEFAULT_MOUNT = (-0.5, 0.0, 0.0, 0.0)  # base x, y, z (m), yaw (rad): 0.5 m behind the task origin
+REACH_BOX = ((0.22, -0.55, -0.05), (0.80, 0.55, 0.70))  # m, base frame: grip-point targets accepted
+LIMIT_MARGIN = 0.02  # rad, joint targets stay this far inside the range (servo overshoot room)
+DAMPING = 0.05  # DLS damping λ (m): keeps Δq bounded near singularities (stretched arm)
+ROT_WEIGHT = 0.5  # m/rad: 1 rad of orientation error weighs like 0.5 m of position error
+NULL_GAIN = 0.1  # fraction of the posture error removed per control step, in the nullspace
+MAX_ROT = 0.1  # rad per control step for the wrist action (PandaWrist)
+IK_ITERS = 60  # DLS iterations of the reset-time IK (converges to < 0.1 mm in the workspace)
+
+ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
+FINGER_JOINTS = ("panda_finger_left", "panda_finger_right")
+ACTUATORS = ARM_JOINTS[:3] + FINGER_JOINTS + ARM_JOINTS[3:]
+_ARM_CTRL = np.array([0, 1, 2, 5, 6, 7, 8])  # ctrl index of joint i
+
+
+def _rot_x(a):
+  c, s = np.cos(a), np.sin(a)
+  return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_z(a):
+  c, s = jnp.cos(a), jnp.sin(a)
+  z, o = jnp.zeros_like(a), jnp.ones_like(a)
+  return jnp.stack([jnp.stack([c, -s, z]), jnp.stack([s, c, z]), jnp.stack([z, z, o])])
+
+
+# per joint: body offset in the parent frame and the fixed rotation RotX(α) before the hinge
+_POS = np.stack([[a, 0.0, 0.0] + _rot_x(al) @ np.array([0.0, 0.0, d]) for a, d, al in DH]).astype(np.float32)
+_RX = np.stack([_rot_x(al) for _, _, al in DH]).astype(np.float32)
+
+
+def fk(q, base_pos, base_rot):
+  """Forward kinematics of the arm.
+
+  Args:
+    q: f32[7] joint angles (rad); base_pos f32[3] (m), base_rot f32[3, 3]: link0 pose in the world.
+  Returns:
+    (p f32[3] grip point m, R f32[3, 3] hand rotation, J f32[6, 7] geometric Jacobian of the grip
+    point: rows 0–2 linear m/rad, rows 3–5 angular, world frame).
+  """
+  def joint(carry, x):
+    p, r = carry
+    pos, rx, qi = x
+    p = p + r @ pos
+    r = r @ rx @ _rot_z(qi)
+    return (p, r), (p, r[:, 2])
+
+  (p, r), (origins, axes) = jax.lax.scan(joint, (base_pos, base_rot), (_POS, _RX, q), unroll=True)
+  r = r @ _rot_z(jnp.asarray(HAND_YAW, q.dtype))
+  p = p + r[:, 2] * (FLANGE_D + GRIP_OFFSET)
+  jp = jnp.cross(axes, p - origins)  # f32[7, 3]
+  return p, r, jnp.concatenate([jp.T, axes.T], axis=0)
+
+
+def rot_err(r, r_des):
+  """Orientation error f32[3] (axis·sin θ, world frame) turning ``r`` toward ``r_des`` (both f32[3, 3])."""
+  return 0.5 * jnp.sum(jnp.cross(r.T, r_des.T), axis=0)
+
+
+def _spd_solve(a, b):
+  """Solve ``a x = b`` for SPD ``a`` f32[n, n], ``b`` f32[n, k] by an unrolled Cholesky factorisation.
+
+  n is 6 here; a hand-written factorisation keeps LAPACK out of the batched step (elementwise ops
+  vectorise over environments on any backend).
+  """
+  n = a.shape[0]
+  lo = [[None] * n for _ in range(n)]
+  for i in range(n):
+    for j in range(i + 1):
+      s = a[i, j] - sum(lo[i][k] * lo[j][k] for k in range(j))
+      lo[i][j] = jnp.sqrt(jnp.maximum(s, 1e-12)) if i == j else s / lo[j][j]
+  y = []
+  for i in range(n):
+    y.append((b[i] - sum(lo[i][k] * y[k] for k in range(i))) / lo[i][i])
+  x = [None] * n
+  for i in reversed(range(n)):
+    x[i] = (y[i] - sum(lo[k][i] * x[k] for k in range(i + 1, n))) / lo[i][i]
+  return jnp.stack(x)
+
+
+def dls_step(q, jac, err, q_posture, null_gain, damping=DAMPING):
+  """Damped-least-squares joint step f32[7] for task error ``err`` f32[6] plus a nullspace posture pull."""
+  a = jac @ jac.T + damping**2 * jnp.eye(6, dtype=jac.dtype)
+  x = _spd_solve(a, jnp.concatenate([err[:, None], jac], axis=1))  # [A⁻¹e, A⁻¹J]
+  dq = jac.T @ x[:, 0]
+  null = jnp.eye(7, dtype=jac.dtype) - jac.T @ x[:, 1:]
+  return dq + null @ (null_gain * (q_posture - q))
+
+
+class Panda(Robot):
+  """The Panda in one compiled scene; ``action = [Δx, Δy, Δz, gripper]``."""
+
+  name = "panda"
+  xml = os.path.join(os.path.dirname(__file__), "panda.xml")
+  action_size = 4
+  proprio_size = 15  # the common 8 + arm joint positions normalised to [−1, 1] (7)
+  agent_bodies = (tuple(f"panda_link{i}" for i in range(0, 8)) + ("panda_hand",)
+                  + FINGER_JOINTS)
+  nq = 9
+  nu = 9
+  default_mount = DEFAULT_MOUNT
+
+  def __init__(self, m: mujoco.MjModel, control_dt: float):
+    qadr = [int(m.jnt_qposadr[m.joint(n).id]) for n in ARM_JOINTS + FINGER_JOINTS]
+    vadr = [int(m.jnt_dofadr[m.joint(n).id]) for n in ARM_JOINTS + FINGER_JOINTS]
+    act = [m.actuator(n).id for n in ACTUATORS]
+    if qadr != list(range(9)) or vadr != list(range(9)) or act != list(range(9)):
+      raise ValueError("scene: robot.xml must be included before any other joint/actuator "
+                       f"(got qpos adr {qadr}, dof adr {vadr}, actuators {act})")
+    rng = np.array([m.jnt_range[m.joint(n).id] for n in ARM_JOINTS])
+    if not np.allclose(rng, np.stack([Q_LO, Q_HI], 1), atol=1e-5):
+      raise ValueError(f"scene: panda joint ranges {rng.tolist()} differ from the controller's")
+    super().__init__(m, control_dt)
+    b = m.body("panda_link0").id
+    self.base_pos = np.asarray(m.body_pos[b], np.float32)
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, m.body_quat[b])
+    self.base_rot = rot.reshape(3, 3).astype(np.float32)
+    self.r_des = R_DOWN.astype(np.float32)
+    self.dq_max = (V_MAX * self.control_dt).astype(np.float32)  # rad per control step
+    self.q_lo = (Q_LO + LIMIT_MARGIN).astype(np.float32)
+    self.q_hi = (Q_HI - LIMIT_MARGIN).astype(np.float32)
+
+  @classmethod
+  def place(cls, m: mujoco.MjModel, mount) -> None:
+    x, y, z, yaw = (float(v) for v in mount)
+    b = m.body("panda_link0").id
+    m.body_pos[b] = (x, y, z)
+    m.body_quat[b] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
+
+  def workspace(self, lo, hi):
+    corners = np.array(np.meshgrid(*zip(*REACH_BOX), indexing="ij")).reshape(3, -1).T
+    world = corners @ self.base_rot.T + self.base_pos
+    rlo, rhi = world.min(0), world.max(0)
+    lo, hi = np.maximum(np.asarray(lo), rlo), np.minimum(np.asarray(hi), rhi)
+    if np.any(lo > hi):
+      raise ValueError(f"workspace: the task's box does not meet the panda's reach {rlo}–{rhi}")
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+  # -- state readers ------------------------------------------------------------------
+  def kinematics(self, q):
+    """(grip point f32[3], hand rotation f32[3, 3], Jacobian f32[6, 7]) at arm angles ``q`` f32[7]."""
+    return fk(q, self.base_pos, self.base_rot)
+
+  def eef_pos(self, d) -> jax.Array:
+    return self.kinematics(d.qpos[0:7])[0]
+
+  def eef_vel(self, d) -> jax.Array:
+    return self.kinematics(d.qpos[0:7])[2][0:3] @ d.qvel[0:7]
+
+  def hand_rot(self, d) -> jax.Array:
+    """Hand rotation f32[3, 3] (columns: hand x, finger axis, approach direction)."""
+    return self.kinematics(d.qpos[0:7])[1]
+
+  def finger_q(self, d):
+    return d.qpos[7:9], d.qvel[7:9]
+
+  def proprio(self, d) -> jax.Array:
+    q = d.qpos[0:7]
+    qn = (2.0 * q - (Q_HI + Q_LO)) / (Q_HI - Q_LO)
+    return jnp.concatenate([super().proprio(d), qn.astype(q.dtype)])
+
+  # -- control ----------------------------------------------------------------------------
+  def _r_target(self, r, a):
+    return jnp.asarray(self.r_des)
+
+  def arm_targets(self, q, a, lo, hi):
+    """Joint position targets f32[7] for arm angles ``q`` f32[7] and sanitized action ``a``."""
+    p, r, jac = self.kinematics(q)
+    dp = jnp.clip(p + a[0:3] * MAX_STEP, lo, hi) - p
+    err = jnp.concatenate([dp, ROT_WEIGHT * rot_err(r, self._r_target(r, a))])
+    jw = jac.at[3:].multiply(ROT_WEIGHT)
+    dq = dls_step(q, jw, err, jnp.asarray(Q_READY, q.dtype), NULL_GAIN)
+    scale = jnp.min(jnp.minimum(1.0, self.dq_max / jnp.maximum(jnp.abs(dq), 1e-9)))
+    return jnp.clip(q + scale * dq, self.q_lo, self.q_hi)
+
+  def _assemble(self, q_arm, fingers):
+    return jnp.concatenate([q_arm[0:3], fingers, q_arm[3:7]])
+
+  def ctrl(self, d, action, lo, hi, extra_ctrl=None) -> jax.Array:
+    a = sanitize(action)
+    q_t = self.arm_targets(d.qpos[0:7], a, lo, hi)
+    return self._pad(self._assemble(q_t, self.finger_ctrl(a[-1])), extra_ctrl)
+
+  def ik(self, pos, r_des=None, q0=None):
+    """Arm angles f32[7] putting the grip point at ``pos`` f32[3] with hand rotation ``r_des``
+    (default: pointing down), by ``IK_ITERS`` undamped-rate DLS iterations from ``q0``
+    (default: the ready pose turned toward ``pos``)."""
+    r_des = jnp.asarray(self.r_des if r_des is None else r_des)
+    if q0 is None:
+      rel = self.base_rot.T @ (pos - self.base_pos)
+      q0 = jnp.asarray(Q_READY, jnp.float32).at[0].set(jnp.arctan2(rel[1], rel[0]))
+
+    def it(q, _):
+      p, r, jac = self.kinematics(q)
+      err = jnp.concatenate([pos - p, ROT_WEIGHT * rot_err(r, r_des)])
+      dq = dls_step(q, jac.at[3:].multiply(ROT_WEIGHT), err, q0, 0.05, damping=0.02)
+      return jnp.clip(q + dq, self.q_lo, self.q_hi), None
+
+    q, _ = jax.lax.scan(it, q0, None, length=IK_ITERS)
+    return q
+
+  def home(self, qpos, pos, q_half) -> jax.Array:
+    q = self.ik(jnp.asarray(pos, jnp.float32))
+    qf = jnp.clip(q_half, self.finger_range[0], self.finger_range[1])
+    return qpos.at[0:7].set(q).at[7:9].set(qf)
+
+  def hold_ctrl(self, qpos, nu) -> jax.Array:
+    return jnp.zeros((nu,)).at[0:9].set(self._assemble(qpos[0:7], qpos[7:9]))
+
+
+def _exp_so3(w):
+  """Rotation matrix f32[3, 3] of rotation vector ``w`` f32[3] (rad), Rodrigues' formula."""
+  th = jnp.sqrt(jnp.sum(w * w) + 1e-12)
+  k = w / th
+  kx = jnp.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]], w.dtype)
+  return jnp.eye(3, dtype=w.dtype) + jnp.sin(th) * kx + (1.0 - jnp.cos(th)) * kx @ kx
+
+
+class PandaWrist(Panda):
+  """The Panda with ``action = [Δx, Δy, Δz, Δrx, Δry, Δrz, gripper]``: ``a[3:6]·MAX_ROT`` is a rotation
+  vector (world frame, rad) turning the hand from its measured orientation (for pouring)."""
+
+  name = "panda_wrist"
+  action_size = 7
+
+  def _r_target(self, r, a):
+    return _exp_so3(a[3:6] * MAX_ROT) @ r

@@ -1,0 +1,151 @@
+"""Robots of the task suite (tasks/robots): the Panda model, its IK controller, the gripper unchanged.
+
+Cheap checks (no MJX compile): the pure-JAX forward kinematics equals MuJoCo's on
+random configurations; the MJCF carries Franka's published limits; reset-time IK
+reaches workspace points; the agent entity holds every arm link; ``make`` errors.
+Two compiled checks on the bare robot scene (tasks.robots.checks): figure-eight
+tracking RMS ≤ 5 mm, and 1 env × 300 (slow: 8 envs × 500) random-action control steps never exceed a
+joint range by more than 0.01 rad and stay finite.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+from mujoco import mjx
+
+import tasks
+from tasks import robot as R
+from tasks import robots
+from tasks.robots import checks
+from tasks.robots import panda as P
+from tasks.robots.gripper import Gripper
+
+
+@pytest.fixture(scope="module")
+def bare():
+  return checks.bare_scene("panda")
+
+
+def test_fk_matches_mujoco(bare):
+  m, _, robot = bare
+  d = mujoco.MjData(m)
+  site, hand = m.site("panda_grip").id, m.body("panda_hand").id
+  rng = np.random.default_rng(0)
+  for _ in range(5):
+    q = rng.uniform(P.Q_LO, P.Q_HI)
+    d.qpos[:7] = q
+    mujoco.mj_forward(m, d)
+    p, rot, jac = robot.kinematics(jnp.asarray(q, jnp.float32))
+    jp, jr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    mujoco.mj_jacSite(m, d, jp, jr, site)
+    np.testing.assert_allclose(p, d.site_xpos[site], atol=1e-5)
+    np.testing.assert_allclose(rot, d.xmat[hand].reshape(3, 3), atol=1e-5)
+    np.testing.assert_allclose(jac, np.vstack([jp, jr])[:, :7], atol=1e-5)
+
+
+def test_model_has_franka_limits_and_contact_bits(bare):
+  m, _, _ = bare
+  arm = [m.joint(n).id for n in P.ARM_JOINTS]
+  np.testing.assert_allclose(m.jnt_range[arm], np.stack([P.Q_LO, P.Q_HI], 1), atol=1e-5)
+  np.testing.assert_allclose(m.jnt_actfrcrange[arm, 1], [87, 87, 87, 87, 12, 12, 12])
+  assert m.jnt_actgravcomp[arm].all()
+  fingers = [m.joint(n).id for n in P.FINGER_JOINTS]
+  gaps = 2 * (m.jnt_range[fingers] - R.FINGER_HALF_THICK)  # inner gap at both ends of each finger's range
+  np.testing.assert_allclose(gaps, [[0.0, 0.08], [0.0, 0.08]], atol=1e-9)
+  assert abs(m.body_subtreemass[m.body("panda_link1").id] - 16.822) < 1e-3  # Gaz et al. link masses + hand
+  col = [g for g in range(m.ngeom) if m.geom(g).name.startswith("panda_")]
+  assert len(col) == 10  # link1–7, hand, two pads
+  for a in col:  # robot geoms never collide with each other
+    for b in col:
+      assert not (m.geom_contype[a] & m.geom_conaffinity[b]), (m.geom(a).name, m.geom(b).name)
+  assert m.geom_conaffinity[m.geom("panda_link1").id] == 4  # shoulder: objects only, never the counter
+  assert m.geom_conaffinity[m.geom("panda_link5").id] == 5
+
+
+def test_reset_ik_reaches_workspace_points(bare):
+  _, _, robot = bare
+  for pos in ([-0.2, -0.1, 0.02], [0.2, 0.15, 0.3], [0.0, 0.0, 0.12]):
+    q = robot.ik(jnp.asarray(pos, jnp.float32))
+    p, rot, _ = robot.kinematics(q)
+    assert np.linalg.norm(np.asarray(p) - pos) < 1e-3, pos
+    assert np.abs(np.asarray(rot) - P.R_DOWN).max() < 1e-2, pos
+    assert np.all(np.asarray(q) >= P.Q_LO) and np.all(np.asarray(q) <= P.Q_HI)
+
+
+def test_agent_entity_holds_every_arm_link_and_make_api():
+  env = tasks.make("place_plate", robot="panda")
+  m = env.unwrapped.mj_model
+  panda_bodies = {m.body(b).name for b in range(m.nbody) if m.body(b).name.startswith("panda_")}
+  agent = {l.split("/", 1)[1] for l in env.link_names if l.startswith("agent/")}
+  assert agent == panda_bodies and len(agent) == 11
+  assert env.action_size == 4 and env.unwrapped.robot.name == "panda"
+  assert env.observation_size == tasks.make("place_plate").observation_size + 7  # proprio 15 vs 8
+  assert tasks.default_config("place_plate")["robot"] == "gripper"
+  with pytest.raises(ValueError, match="robot: unknown 'ur5'; valid: gripper, panda"):
+    tasks.make("place_plate", robot="ur5")
+
+
+def test_gripper_readers_unchanged():
+  """The gripper's controls and readers are the pre-refactor formulas, inside and outside a task scope."""
+  env = tasks.make("place_plate")
+  rob = env.unwrapped.robot
+  assert isinstance(rob, Gripper) and R.AGENT_BODIES == ("hand", "finger_left", "finger_right")
+  d = mjx.make_data(env.unwrapped.sys)
+  rng = np.random.default_rng(1)
+  d = d.replace(qpos=jnp.asarray(rng.normal(size=d.qpos.shape), jnp.float32),
+                qvel=jnp.asarray(rng.normal(size=d.qvel.shape), jnp.float32))
+  a = jnp.asarray([0.3, -2.0, jnp.nan, 0.25])
+  lo, hi = env.unwrapped.ws_lo, env.unwrapped.ws_hi
+  want_target = jnp.clip(d.qpos[0:3] + jnp.array([0.3, -1.0, 0.0]) * 0.02, lo, hi)
+  q = R.Q_MIN + 0.5 * 1.25 * (R.Q_MAX - R.Q_MIN)
+  np.testing.assert_array_equal(rob.ctrl(d, a, lo, hi), jnp.concatenate([want_target, jnp.stack([q, q])]))
+  want_prop = jnp.concatenate([d.qpos[0:3], d.qvel[0:3], R.gap(0.5 * (d.qpos[3:4] + d.qpos[4:5])),
+                               d.qvel[3:4] + d.qvel[4:5]])
+  np.testing.assert_array_equal(R.Robot.proprio(d), want_prop)
+  with R.active(rob):
+    np.testing.assert_array_equal(R.Robot.proprio(d), want_prop)
+    np.testing.assert_array_equal(R.Robot.eef_pos(d), d.qpos[0:3])
+
+
+def test_panda_scope_reads_forward_kinematics(bare):
+  m, sys, robot = bare
+  d = mjx.make_data(sys)
+  d = d.replace(qpos=robot.home(d.qpos, jnp.array([0.1, -0.05, 0.15]), 0.03))
+  with R.active(robot):
+    np.testing.assert_allclose(R.Robot.eef_pos(d), [0.1, -0.05, 0.15], atol=1e-3)
+    np.testing.assert_allclose(R.Robot.gap(d), 2 * (0.03 - R.FINGER_HALF_THICK), atol=1e-6)
+  md = mujoco.MjData(m)
+  md.qpos[:] = np.asarray(d.qpos)
+  mujoco.mj_kinematics(m, md)
+  np.testing.assert_allclose(md.site_xpos[m.site("panda_grip").id], [0.1, -0.05, 0.15], atol=1e-3)
+
+
+def test_ik_tracks_figure_eight_within_5mm():
+  dt = 0.004 * checks.N_SUBSTEPS
+  wp = checks.figure_eight(int(5.5 / dt), dt)  # one 5 s period after a 0.5 s settle
+  err, _ = checks.track("panda", wp)()
+  err = np.asarray(err)[int(0.5 / dt):]
+  assert np.all(np.isfinite(err))
+  assert np.sqrt(np.mean(err**2)) < 0.005, np.sqrt(np.mean(err**2))
+
+
+def _check_random_actions(n_envs, n_steps, seed):
+  worst, finite, eef = checks.random_actions("panda", n_envs, n_steps)(jax.random.PRNGKey(seed))
+  assert bool(finite)
+  assert float(worst) < 0.01, float(worst)
+  assert np.all(np.asarray(eef)[:, 2] > -0.01)  # the hand never goes through the counter
+
+
+def test_random_actions_respect_joint_limits():
+  # one env × 300 control steps (1800 physics substeps): about half a minute on 2 cores
+  _check_random_actions(1, 300, 3)
+
+
+@pytest.mark.slow
+def test_random_actions_respect_joint_limits_batched():
+  # 8 envs × 500 control steps; benchmarks/panda_ik.py runs 10⁴ steps for both action spaces
+  _check_random_actions(8, 500, 4)
