@@ -27,7 +27,7 @@ if one 10-minute call is too short, with ``--resume``)::
     python benchmarks/il_study.py --results-dir $OUT
     python benchmarks/il_study.py --tasks pick_egg,shelve_item --results-dir $OUT   # a subset
 
-CPU (tiny: 1 task, 32 demos per condition, 2 seeds, 64 evaluation episodes)::
+CPU (tiny: 1 task, 64 demos per condition, 2 seeds, 64 evaluation episodes)::
 
     .venv/bin/python benchmarks/il_study.py --quick
 """
@@ -52,8 +52,8 @@ REGIME_LABELS = {"careless": "without health feedback", "careful": "with health 
                  "filtered_episodes": "health-filtered episodes", "filtered_datapoints": "health-filtered datapoints"}
 COLORS = {"careless": "tab:blue", "careful": "tab:orange", "all": "tab:green", "filtered_episodes": "tab:red",
           "filtered_datapoints": "tab:purple"}
-FULL = dict(demos=128, seeds=3, eval_episodes=256, steps=4000, batch=256, hidden=(512, 512, 512), chunk=256)
-QUICK = dict(demos=32, seeds=2, eval_episodes=64, steps=1000, batch=128, hidden=(256, 256), chunk=64,
+FULL = dict(demos=256, seeds=3, eval_episodes=256, steps=8000, batch=256, hidden=(512, 512, 512), chunk=256)
+QUICK = dict(demos=64, seeds=2, eval_episodes=64, steps=6000, batch=256, hidden=(512, 512, 512), chunk=64,
              tasks=("pick_egg",))
 
 
@@ -68,6 +68,8 @@ def parse(argv):
   p.add_argument("--batch", type=int, default=None)
   p.add_argument("--hidden", default=None, help="hidden sizes, e.g. 512,512,512")
   p.add_argument("--chunk", type=int, default=None, help="episodes per compiled recording call")
+  p.add_argument("--temperature", type=float, default=None,
+                 help="flow policy: scale of the initial noise when acting (default: flow_policy.TEMPERATURE)")
   p.add_argument("--max-damage", type=float, default=5.0, help="datapoint filter: health points over 8 steps")
   p.add_argument("--min-health", type=float, default=95.0, help="episode filter threshold")
   p.add_argument("--quick", action="store_true", help="CPU size: " + str(QUICK))
@@ -82,6 +84,12 @@ def parse(argv):
     if getattr(args, k) < 1:
       p.error(f"--{k.replace('_', '-')}: must be >= 1")
   args.hidden = tuple(int(s) for s in args.hidden.split(",")) if args.hidden else size["hidden"]
+  if args.temperature is None:
+    from train.flow_policy import TEMPERATURE
+
+    args.temperature = TEMPERATURE
+  if args.temperature < 0:
+    p.error("--temperature: must be >= 0")
   if args.quick and args.tasks == ",".join(TASKS):
     args.tasks = ",".join(QUICK["tasks"])
   args.tasks = [t for t in args.tasks.split(",") if t]
@@ -158,7 +166,8 @@ def run_task(task, args, log):
   seeds = list(range(args.seeds))
   if args.policy == "flow":
     train = lambda ds: flow_policy.train_flow(ds, seeds, args.steps, args.batch, hidden=args.hidden)
-    apply = flow_policy.flow_apply(env.action_size, flow_policy.CHUNK, args.hidden)
+    apply = flow_policy.flow_apply(env.action_size, flow_policy.CHUNK, args.hidden,
+                                   temperature=args.temperature)
   else:
     train = lambda ds: bc.train_bc(ds, seeds, args.steps, args.batch, hidden=args.hidden)
     apply = bc.bc_apply(env.action_size, args.hidden)
@@ -258,7 +267,7 @@ def main(argv=None) -> int:
   slug, device = device_info()
   base = os.path.join(args.results_dir, f"il_study_{slug}{'_' + args.tag if args.tag else ''}")
   config = {k: getattr(args, k) for k in ("policy", "demos", "seeds", "eval_episodes", "steps", "batch",
-                                          "max_damage", "min_health")}
+                                          "max_damage", "min_health", "temperature")}
   config["hidden"] = list(args.hidden)
   payload = {"device": device, "jax": jax.__version__, "config": config, "tasks": [],
              "command": "python " + " ".join(shlex.quote(a) for a in [os.path.relpath(__file__, ROOT)] + sys.argv[1:]),

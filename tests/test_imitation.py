@@ -71,6 +71,11 @@ def test_flow_policy_trains_and_samples_finite_actions(demos):
   obs = jnp.asarray(demos.obs["state"][0, :5])
   act = jax.jit(jax.vmap(lambda o, k: policy(SimpleNamespace(obs=o), k)))(obs, jax.random.split(jax.random.PRNGKey(0), 5))
   assert act.shape == (5, 4) and np.all(np.isfinite(act)) and np.all(np.abs(act) <= 1)
+  # temperature 0 (the default) ignores the rng; a sampled start does not
+  one = lambda pol, k: pol(SimpleNamespace(obs=obs[0]), jax.random.PRNGKey(k))
+  np.testing.assert_array_equal(one(policy, 0), one(policy, 1))
+  hot = FP.flow_policy(res, 1, flow_steps=4, temperature=1.0)
+  assert not np.allclose(one(hot, 0), one(hot, 1))
 
 
 def test_bad_training_arguments(demos):

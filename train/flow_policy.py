@@ -12,7 +12,11 @@ end the last action repeats), ``x₀ ~ N(0, I)``, ``τ ~ Beta(1.5, 1)`` (paper),
 weight decay 1e-3, gradient clip 5 (the paper's table). Seeds vmapped, one jit
 (:func:`train.imitation.fit`).
 
-Acting: K = 16 Euler steps from noise give a chunk; the policy executes its
+Acting: K = 16 Euler steps give a chunk, starting from ``temperature`` × noise
+(default 0: from the noise's mean, a deterministic policy: sampled starts
+replay the operators' hand tremor that the demonstrations contain, which the
+closed-loop scripts corrected but a precise grasp does not forgive; compare
+with ``benchmarks/il_study.py --temperature 1``). The policy executes its
 FIRST action only and re-plans at the next step (receding horizon). That keeps
 ``policy(state, rng) -> action`` stateless, so the project's evaluator runs it
 unchanged; executing whole chunks open-loop would need a chunk buffer in the
@@ -36,6 +40,7 @@ from train.evaluate import parametrized_policy
 CHUNK = 8
 FLOW_STEPS = 16
 TIME_FEATURES = 16
+TEMPERATURE = 0.0
 
 
 def time_features(tau: jax.Array) -> jax.Array:
@@ -109,10 +114,13 @@ def train_flow(ds: D.Dataset, seeds: Sequence[int] = (0,), steps: int = 4000, ba
 
 
 def sample_chunk(net: VelocityMLP, params, obs, rng, action_size: int, chunk: int,
-                 flow_steps: int = FLOW_STEPS) -> jax.Array:
-  """An action chunk f32[chunk, A] for one observation: Euler integration of the flow from noise."""
+                 flow_steps: int = FLOW_STEPS, temperature: float = 1.0) -> jax.Array:
+  """An action chunk f32[chunk, A] for one observation: Euler integration of the flow from noise.
+
+  ``temperature`` scales the initial noise (0: start at the noise's mean, a deterministic policy).
+  """
   o = IL.normalize(params["norm"], obs)
-  x = jax.random.normal(rng, (chunk * action_size,))
+  x = temperature * jax.random.normal(rng, (chunk * action_size,))
   dt = 1.0 / flow_steps
 
   def body(x, i):
@@ -123,18 +131,19 @@ def sample_chunk(net: VelocityMLP, params, obs, rng, action_size: int, chunk: in
 
 
 def flow_apply(action_size: int, chunk: int = CHUNK, hidden: Sequence[int] = (512, 512, 512),
-               flow_steps: int = FLOW_STEPS):
+               flow_steps: int = FLOW_STEPS, temperature: float = TEMPERATURE):
   """``apply(params, state, rng) -> action f32[A]``: the first action of a fresh chunk (receding horizon)."""
   net = VelocityMLP(chunk * action_size, tuple(hidden))
 
   def apply(params, state, rng):
-    c = sample_chunk(net, params, state.obs, rng, action_size, chunk, flow_steps)
+    c = sample_chunk(net, params, state.obs, rng, action_size, chunk, flow_steps, temperature)
     return jnp.clip(c[0], -1.0, 1.0)
 
   return apply
 
 
-def flow_policy(res: FlowResult, seed_index: int = 0, flow_steps: int = FLOW_STEPS):
+def flow_policy(res: FlowResult, seed_index: int = 0, flow_steps: int = FLOW_STEPS,
+                temperature: float = TEMPERATURE):
   """Seed ``seed_index``'s policy ``policy(state, rng) -> action`` (weights passed to the evaluator as data)."""
-  apply = flow_apply(res.action_size, res.chunk, res.hidden, flow_steps)
+  apply = flow_apply(res.action_size, res.chunk, res.hidden, flow_steps, temperature)
   return parametrized_policy(apply, IL.seed_params(res.params, seed_index))
