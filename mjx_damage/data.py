@@ -263,16 +263,24 @@ def _write_demos(g, ds: Dataset, start: int) -> None:
     d.attrs["success"] = bool(ds.success[i])
     d.attrs["safe"] = bool(ds.safe[i])
     d.attrs["label"] = ds.label_names[int(ds.labels[i])] if len(ds.label_names) else ""
-    for k, v in ds.obs.items():
-      d.create_dataset(f"obs/{k}", data=v[i, :n])
     for k in _STEP_ARRAYS:
-      d.create_dataset(k, data=getattr(ds, k)[i, :n])
-    for k, v in ds.health.items():
-      d.create_dataset(f"health/{k}", data=v[i, :n])
-    for k, v in ds.damage.items():
-      d.create_dataset(f"damage/{k}", data=v[i, :n])
+      _put(d, k, getattr(ds, k)[i, :n])
+    for sub in ("obs", "health", "damage"):
+      s = d.create_group(sub)
+      for k, v in getattr(ds, sub).items():
+        _put(s, k, v[i, :n])
     total += n
   g.attrs["total"] = total
+
+
+def _put(group, name: str, a: np.ndarray) -> None:
+  """A contiguous dataset ``group/name`` holding ``a``, through h5py's low-level API: the
+  high-level ``create_dataset`` costs ~1.5× more per call, and a file holds ~15 per episode."""
+  a = np.ascontiguousarray(a)
+  space = h5py.h5s.create_simple(a.shape) if a.ndim else h5py.h5s.create(h5py.h5s.SCALAR)
+  dset = h5py.h5d.create(group.id, name.encode(), h5py.h5t.py_create(a.dtype, logical=True), space)
+  if a.size:
+    dset.write(h5py.h5s.ALL, h5py.h5s.ALL, a)
 
 
 def _check_self(ds: Dataset) -> None:
