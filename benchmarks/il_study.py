@@ -22,10 +22,13 @@ Writes ``benchmarks/results/il_study_<device>[_<tag>].{json,md,png}`` (rewritten
 after every task; ``--resume`` skips the tasks already in that JSON).
 
 GPU (full size; about 2–4 min per task on one H100 — run tasks in separate calls
-if one 10-minute call is too short, with ``--resume``)::
+if one 10-minute call is too short: one ``--tag`` per call, then ``--combine``)::
 
-    python benchmarks/il_study.py --results-dir $OUT
-    python benchmarks/il_study.py --tasks pick_egg,shelve_item --results-dir $OUT   # a subset
+    python benchmarks/il_study.py --results-dir $OUT                                   # all five tasks
+    python benchmarks/il_study.py --tasks pick_egg,wipe_counter --tag a --results-dir $OUT
+    python benchmarks/il_study.py --tasks shelve_item,add_firewood --tag b --results-dir $OUT
+    python benchmarks/il_study.py --tasks pour_water --tag c --results-dir $OUT
+    python benchmarks/il_study.py --combine benchmarks/results/il_study_<device>_{a,b,c}.json --tag all
 
 CPU (tiny: 1 task, 64 demos per condition, 2 seeds, 64 evaluation episodes)::
 
@@ -74,6 +77,8 @@ def parse(argv):
   p.add_argument("--min-health", type=float, default=95.0, help="episode filter threshold")
   p.add_argument("--quick", action="store_true", help="CPU size: " + str(QUICK))
   p.add_argument("--resume", action="store_true", help="skip tasks already in the results JSON")
+  p.add_argument("--combine", nargs="+", default=None, metavar="JSON",
+                 help="only merge the tasks of these results files (same config) into one table + chart")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   p.add_argument("--tag", default="")
   args = p.parse_args(argv)
@@ -256,6 +261,41 @@ def plot(path, payload):
   plt.close(fig)
 
 
+def combine(paths, results_dir, tag):
+  """Merge the tasks of several results files of one config and device into
+  ``results_dir/il_study_<device>[_<tag>].{json,md,png}``; returns that base path."""
+  import json
+
+  from mjx_damage.io import write_json
+
+  parts = []
+  for path in paths:
+    if not os.path.isfile(path):
+      raise ValueError(f"--combine: {path}: no such file")
+    with open(path) as f:
+      parts.append(json.load(f))
+  for p, path in zip(parts[1:], paths[1:]):
+    if p["config"] != parts[0]["config"]:
+      raise ValueError(f"--combine: {path} has another config than {paths[0]}")
+  tasks, seen = [], set()
+  for p in parts:
+    tasks += [t for t in p["tasks"] if t["task"] not in seen]
+    seen |= {t["task"] for t in p["tasks"]}
+  payload = dict(parts[0], tasks=tasks, combined_from=[{"file": os.path.basename(x), "command": p["command"],
+                                                        "date": p["date"]} for x, p in zip(paths, parts)])
+  payload["command"] = "; ".join(p["command"] for p in parts)
+  slug = parts[0].get("device_slug")
+  if not slug or any(p.get("device_slug") != slug for p in parts):
+    raise ValueError("--combine: the files must come from one device (device_slug)")
+  base = os.path.join(results_dir, f"il_study_{slug}{'_' + tag if tag else ''}")
+  if os.path.abspath(base + ".json") in {os.path.abspath(x) for x in paths}:
+    raise ValueError(f"--combine: would overwrite its input {base}.json; pass another --tag")
+  write_json(base + ".json", payload)
+  write_md(base + ".md", payload)
+  plot(base + ".png", payload)
+  return base
+
+
 def main(argv=None) -> int:
   args = parse(argv)
   import json
@@ -264,12 +304,20 @@ def main(argv=None) -> int:
 
   from mjx_damage.io import write_json
 
-  slug, device = device_info()
-  base = os.path.join(args.results_dir, f"il_study_{slug}{'_' + args.tag if args.tag else ''}")
+  if args.combine:
+    try:
+      base = combine(args.combine, args.results_dir, args.tag)
+    except ValueError as e:
+      print(f"error: {e}", file=sys.stderr)
+      return 2
+    print(f"wrote {base}.{{json,md,png}}")
+    return 0
   config = {k: getattr(args, k) for k in ("policy", "demos", "seeds", "eval_episodes", "steps", "batch",
                                           "max_damage", "min_health", "temperature")}
   config["hidden"] = list(args.hidden)
-  payload = {"device": device, "jax": jax.__version__, "config": config, "tasks": [],
+  slug, device = device_info()
+  base = os.path.join(args.results_dir, f"il_study_{slug}{'_' + args.tag if args.tag else ''}")
+  payload = {"device": device, "device_slug": slug, "jax": jax.__version__, "config": config, "tasks": [],
              "command": "python " + " ".join(shlex.quote(a) for a in [os.path.relpath(__file__, ROOT)] + sys.argv[1:]),
              "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
   if args.resume and os.path.exists(base + ".json"):
