@@ -245,10 +245,15 @@ def plot(path, payload):
   for j, r in enumerate(REGIMES):
     xs = [i + (j - (len(REGIMES) - 1) / 2) * w for i in range(len(rows))]
     get = lambda k: [100 * t["regimes"][r][k] for t in rows]
-    ax.bar(xs, get("completion"), w * 0.95, color=COLORS[r], alpha=0.45, yerr=get("completion_ci95"),
+
+    def err(k):  # the t-interval drawn within [0, 100] (with few seeds it can reach past both)
+      m, h = get(k), get(k + "_ci95")
+      return [[min(a, b) for a, b in zip(h, m)], [min(a, 100 - b) for a, b in zip(h, m)]]
+
+    ax.bar(xs, get("completion"), w * 0.95, color=COLORS[r], alpha=0.45, yerr=err("completion"),
            capsize=2, label=f"{REGIME_LABELS[r]}")
     ax.bar(xs, get("safe_completion"), w * 0.95, color="none", edgecolor=COLORS[r], hatch="///",
-           yerr=get("safe_completion_ci95"), capsize=2)
+           yerr=err("safe_completion"), capsize=2)
   ax.set_xticks(range(len(rows)), [t["task"] for t in rows])
   ax.set_ylabel("rate (%): completion solid, safe completion hatched")
   ax.set_ylim(0, 105)
