@@ -213,14 +213,17 @@ def write_md(path, payload):
            f"kept); {payload['config']['seeds']} training seeds; {payload['config']['eval_episodes']} evaluation "
            "episodes per (regime, seed). Values: mean over seeds ± half-width of the 95 % t-interval over seeds. "
            "Safe completion = completed and every entity's final health > 95.", "",
-           "| task | regime | demos | steps | data safe % | completion % | safe completion % | avg health |",
-           "|---|---|---|---|---|---|---|---|"]
+           "| task | regime | demos | steps | data safe % | completion % | safe completion % | avg health "
+           "| per seed: completion / safe % |",
+           "|---|---|---|---|---|---|---|---|---|"]
   for t in payload["tasks"]:
     for r, row in t["regimes"].items():
       lines.append(f"| {t['task']} | {REGIME_LABELS[r]} | {row['episodes']} | {row['transitions']} | "
                    f"{100 * row['data_safe_fraction']:.0f} | {100 * row['completion']:.1f} ± "
                    f"{100 * row['completion_ci95']:.1f} | {100 * row['safe_completion']:.1f} ± "
-                   f"{100 * row['safe_completion_ci95']:.1f} | {row['avg_health']:.1f} |")
+                   f"{100 * row['safe_completion_ci95']:.1f} | {row['avg_health']:.1f} | "
+                   + ", ".join(f"{100 * x['completion']:.0f} / {100 * x['safe_completion']:.0f}"
+                               for x in row["per_seed"]) + " |")
   lines += ["", "Recorded demonstrations (before keeping the successful ones):", ""]
   for t in payload["tasks"]:
     for c, r in t["recorded"].items():
