@@ -1,6 +1,7 @@
 """mjx_damage.data: lossless HDF5 round trip in the robomimic layout, append, and bad-input errors."""
 
 import h5py
+import jax
 import numpy as np
 import pytest
 
@@ -38,8 +39,6 @@ def assert_same(a: D.Dataset, b: D.Dataset):
 
 
 def jax_leaves(ds):
-  import jax
-
   return [(jax.tree_util.keystr(p), np.asarray(x)) for p, x in jax.tree_util.tree_leaves_with_path(ds)]
 
 
