@@ -15,11 +15,11 @@ c ∈ [c_lo, c_hi] and from it (:func:`draw_style`):
   clipped by the env at the robot's max step;
 * grip force — ``0.1·(1 − c)`` subtracted from every gripper command (tighter
   targets, i.e. a harder squeeze, for a careless hand);
-* noise — each step the position action is multiplied by ``1 + ε``, ε Gaussian
-  of std ``0.05 + 0.45·(1 − c)`` per axis (hand tremor while moving; additive
-  noise of that size would keep the hand from ever coming to rest, which
-  pour_water's script waits for before tipping; the scripts are closed-loop,
-  so they correct the rest);
+* noise — Gaussian of std ``0.02 + 0.2·(1 − c)`` added to the position action
+  each step, scaled by ``min(1, ‖script's position action‖ / 0.1)`` (hand
+  tremor while moving; unscaled, it keeps the hand from ever coming to rest,
+  which pour_water's script waits for before tipping); the scripts are
+  closed-loop, so they correct it;
 
 then :func:`operator_act` plays the chosen script with those changes.
 
@@ -50,6 +50,7 @@ import tasks
 from mjx_damage.health import MAX_HEALTH
 
 CONDITIONS = ("careful", "careless", "mixed")
+STEADY_BELOW = 0.1  # position-action norm below which the tremor fades out (the script is settling)
 
 
 class Style(NamedTuple):
@@ -58,7 +59,7 @@ class Style(NamedTuple):
   unsafe: jax.Array  # 1 = follow the shortcut script
   speed: jax.Array  # factor on the position action
   grip: jax.Array  # subtracted from the gripper command (−1 closed … +1 open)
-  noise: jax.Array  # std of the relative Gaussian error of the position action
+  noise: jax.Array  # std of the Gaussian added to the position action while the script moves
   carefulness: jax.Array  # the c the others were drawn from, in [0, 1]
 
 
@@ -76,7 +77,7 @@ def draw_style(key: jax.Array, c_lo: float, c_hi: float) -> Style:
   c = jax.random.uniform(kc, (), minval=c_lo, maxval=c_hi)
   unsafe = (jax.random.uniform(ku) < 0.8 * (1.0 - c)).astype(jnp.float32)
   speed = (1.3 - 0.6 * c) * jax.random.uniform(ks, (), minval=0.9, maxval=1.1)
-  return Style(unsafe=unsafe, speed=speed, grip=0.1 * (1.0 - c), noise=0.05 + 0.45 * (1.0 - c), carefulness=c)
+  return Style(unsafe=unsafe, speed=speed, grip=0.1 * (1.0 - c), noise=0.02 + 0.2 * (1.0 - c), carefulness=c)
 
 
 def operator_act(safe, unsafe, style: Style, state, rng, feedback_drop=None) -> jax.Array:
@@ -95,9 +96,11 @@ def operator_act(safe, unsafe, style: Style, state, rng, feedback_drop=None) -> 
     grip = jnp.where(hurt, 0.0, grip)
     noise = jnp.where(hurt, 0.0, noise)
   a = jnp.where(use_unsafe, unsafe(state, k_unsafe), safe(state, k_safe))
-  # multiplicative: the hand shakes while it moves and is still when the script holds still, so the
-  # scripts' "arrived and at rest" checks (e.g. pour_water's before tipping) still pass
-  xyz = a[:3] * speed * (1.0 + noise * jax.random.normal(k_noise, (3,)))
+  # the hand shakes while the script moves it and steadies when the script holds still, so the scripts'
+  # "arrived and at rest" checks (pour_water's before tipping) still pass; additive while moving, so the
+  # demonstrations visit states around the scripts' paths (what a cloned policy needs to recover from)
+  moving = jnp.clip(jnp.linalg.norm(a[:3]) / STEADY_BELOW, 0.0, 1.0)
+  xyz = a[:3] * speed + moving * noise * jax.random.normal(k_noise, (3,))
   return jnp.clip(jnp.concatenate([xyz, a[3:] - grip]), -1.0, 1.0)
 
 
