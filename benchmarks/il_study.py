@@ -5,7 +5,8 @@ Per task (one command does everything):
 1. record ``--demos`` episodes of each operator condition (:mod:`tasks.operators`:
    ``careful`` = with health feedback, ``careless`` = without) through the compiled
    batched step (:func:`train.record.record`), keeping the successful ones
-   (a human operator's failed takes are not kept either);
+   (a human operator's failed takes are not kept either; a regime left with no
+   data is reported as skipped, with the reason);
 2. build the five data regimes: ``all`` (both conditions), ``careful``,
    ``careless``, ``filtered_episodes`` (all, minus every episode in which an
    entity's health fell below 95) and ``filtered_datapoints`` (all, minus the
@@ -132,16 +133,28 @@ def interval(values):
 
 
 def regimes(careful, careless, args):
+  """{regime: Dataset, or the ValueError's message when curation left nothing (or a condition had no
+  successful demo)}."""
   from mjx_damage import data as D
   from train import curate as C
 
-  both = D.concat([careful, careless])
+  def attempt(make):
+    try:
+      return make()
+    except ValueError as e:
+      return str(e)
+
+  careful, careless = attempt(lambda: C.successful(careful)), attempt(lambda: C.successful(careless))
+  parts = [d for d in (careful, careless) if not isinstance(d, str)]
+  both = D.concat(parts) if parts else "no successful demonstration in either condition"
+  ok = not isinstance(both, str)
   return {
       "careless": careless,
       "careful": careful,
       "all": both,
-      "filtered_episodes": C.filter_episodes(both, args.min_health),
-      "filtered_datapoints": C.filter_datapoints(both, horizon=8, max_damage=args.max_damage),
+      "filtered_episodes": attempt(lambda: C.filter_episodes(both, args.min_health)) if ok else both,
+      "filtered_datapoints": (attempt(lambda: C.filter_datapoints(both, horizon=8, max_damage=args.max_damage))
+                              if ok else both),
   }
 
 
@@ -163,7 +176,7 @@ def run_task(task, args, log):
     ds = record(env, operators.make(env, cond), args.demos, seed=1000 + len(demos), task=task, chunk=args.chunk)
     recorded[cond] = {"episodes": ds.num_episodes, "success": float(ds.success.mean()),
                       "safe_success": float((ds.success & ds.safe).mean())}
-    demos[cond] = curate.successful(ds)
+    demos[cond] = ds
   out["timings"]["record_s"] = time.perf_counter() - t0
   out["recorded"] = recorded
   log(f"{task}: recorded {recorded} in {out['timings']['record_s']:.0f} s")
@@ -181,6 +194,10 @@ def run_task(task, args, log):
   out["regimes"] = {}
   t_train = t_eval = 0.0
   for name, ds in regimes(demos["careful"], demos["careless"], args).items():
+    if isinstance(ds, str):
+      out["regimes"][name] = {"skipped": ds}
+      log(f"{task} / {name}: skipped: {ds}")
+      continue
     t1 = time.perf_counter()
     res = train(ds)
     losses = np.asarray(res.losses)
@@ -218,6 +235,9 @@ def write_md(path, payload):
            "|---|---|---|---|---|---|---|---|---|"]
   for t in payload["tasks"]:
     for r, row in t["regimes"].items():
+      if "skipped" in row:
+        lines.append(f"| {t['task']} | {REGIME_LABELS[r]} | 0 | 0 | – | – | – | – | skipped: {row['skipped']} |")
+        continue
       lines.append(f"| {t['task']} | {REGIME_LABELS[r]} | {row['episodes']} | {row['transitions']} | "
                    f"{100 * row['data_safe_fraction']:.0f} | {100 * row['completion']:.1f} ± "
                    f"{100 * row['completion_ci95']:.1f} | {100 * row['safe_completion']:.1f} ± "
@@ -247,11 +267,12 @@ def plot(path, payload):
   w = 0.8 / len(REGIMES)
   for j, r in enumerate(REGIMES):
     xs = [i + (j - (len(REGIMES) - 1) / 2) * w for i in range(len(rows))]
-    get = lambda k: [100 * t["regimes"][r][k] for t in rows]
+    get = lambda k: [100 * t["regimes"][r].get(k, float("nan")) for t in rows]
 
     def err(k):  # the t-interval drawn within [0, 100] (with few seeds it can reach past both)
-      m, h = get(k), get(k + "_ci95")
-      return [[min(a, b) for a, b in zip(h, m)], [min(a, 100 - b) for a, b in zip(h, m)]]
+      m, h = get(k), [0.0 if math.isnan(x) else x for x in get(k + "_ci95")]
+      return [[min(a, b) if b == b else 0.0 for a, b in zip(h, m)],
+              [min(a, 100 - b) if b == b else 0.0 for a, b in zip(h, m)]]
 
     ax.bar(xs, get("completion"), w * 0.95, color=COLORS[r], alpha=0.45, yerr=err("completion"),
            capsize=2, label=f"{REGIME_LABELS[r]}")
