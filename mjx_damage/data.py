@@ -1,0 +1,379 @@
+"""Demonstration datasets with per-step health: the robomimic HDF5 layout, in memory and on disk.
+
+On disk (one HDF5 file; what robomimic/LeRobot-style readers expect, plus damage)::
+
+    data                       attrs: env_name, env_args (JSON: env_name, type, env_kwargs),
+                                      total (transitions), format, entity_names, labels (JSON)
+    data/demo_<i>              attrs: num_samples, success, safe, label
+    data/demo_<i>/obs/<key>    [n, ...]  observations before the step (key "state": the env's obs)
+    data/demo_<i>/actions      f32[n, A]
+    data/demo_<i>/rewards      f32[n]    env reward of the step (task reward − w·cost)
+    data/demo_<i>/dones        f32[n]    1 on the demo's last step
+    data/demo_<i>/states       f32[n, S] simulator state before the step (qpos ‖ qvel)
+    data/demo_<i>/health/<entity>  f32[n]  entity health after the step, 0–100
+    data/demo_<i>/damage/{mechanical,thermal,fluid}  f32[n]  damage of the step, health points
+    data/demo_<i>/cost         f32[n]    total damage of the step (health points)
+    data/demo_<i>/keep         bool[n]   step usable for training (datapoint curation)
+
+In memory: :class:`Dataset`, a pytree of arrays padded to ``[E, T, ...]`` with
+``lengths`` and ``keep`` (False past an episode's end), so curation and
+training are array operations; :func:`transitions` flattens the kept steps.
+
+Every function here that touches a file raises ``ValueError`` naming the file
+and the cause (missing, not HDF5 / truncated, wrong layout, missing key,
+another task) before returning anything. Writes are atomic
+(:func:`mjx_damage.io.atomic_path`): a file is either the old one or the new one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from typing import Optional, Sequence
+
+import flax
+import h5py
+import numpy as np
+
+from mjx_damage.io import atomic_path
+
+FORMAT = 1
+DAMAGE_KINDS = ("mechanical", "thermal", "fluid")
+_STEP_ARRAYS = ("actions", "rewards", "dones", "states", "cost", "keep")
+
+
+@flax.struct.dataclass
+class Dataset:
+  """E episodes padded to T steps (a pytree; the metadata fields are static).
+
+  obs:      {key: f32[E, T, ...]} observation before each step.
+  actions:  f32[E, T, A]; rewards, dones, cost: f32[E, T]; states: f32[E, T, S].
+  health:   {entity: f32[E, T]} health after each step (0–100).
+  damage:   {"mechanical"|"thermal"|"fluid": f32[E, T]} damage of each step (health points).
+  keep:     bool[E, T] step usable for training (False past ``lengths`` and where curated out).
+  lengths:  i32[E] steps recorded per episode.
+  success:  bool[E] the task's success condition held at some step.
+  safe:     bool[E] every entity's final health above the safe threshold.
+  labels:   i32[E] index into ``label_names`` (who made the demo, e.g. "careful").
+  env_name: the task; env_config: JSON of its make() overrides.
+  """
+
+  obs: dict
+  actions: np.ndarray
+  rewards: np.ndarray
+  dones: np.ndarray
+  states: np.ndarray
+  health: dict
+  damage: dict
+  cost: np.ndarray
+  keep: np.ndarray
+  lengths: np.ndarray
+  success: np.ndarray
+  safe: np.ndarray
+  labels: np.ndarray
+  env_name: str = flax.struct.field(pytree_node=False, default="")
+  env_config: str = flax.struct.field(pytree_node=False, default="{}")
+  label_names: tuple = flax.struct.field(pytree_node=False, default=())
+
+  @property
+  def num_episodes(self) -> int:
+    return int(self.lengths.shape[0])
+
+  @property
+  def entity_names(self) -> tuple[str, ...]:
+    return tuple(self.health)
+
+
+def config_json(config: dict) -> str:
+  """Canonical JSON of a task's make() overrides (sorted keys), as ``Dataset.env_config`` holds it."""
+  return json.dumps(config, sort_keys=True, default=str)
+
+
+def build(*, env_name: str, obs: dict, actions, rewards, states, health: dict, damage: dict, cost,
+          lengths, success, safe, labels=None, label_names: Sequence[str] = (), env_config: Optional[dict] = None,
+          keep=None) -> Dataset:
+  """A :class:`Dataset` from padded ``[E, T, ...]`` arrays (shapes as in its docstring), checked.
+
+  ``keep`` defaults to ``t < lengths``; ``dones`` is 1 on each episode's last step;
+  ``labels`` default to 0 (``label_names`` then ``("default",)`` if empty).
+  """
+  actions = np.asarray(actions, np.float32)
+  if actions.ndim != 3:
+    raise ValueError(f"actions: expected f32[E, T, A], got shape {actions.shape}")
+  e, t = actions.shape[:2]
+  lengths = np.asarray(lengths, np.int32).reshape(-1)
+  if lengths.shape != (e,):
+    raise ValueError(f"lengths: expected i32[{e}], got shape {lengths.shape}")
+  steps = np.arange(t)[None, :]
+  valid = steps < lengths[:, None]
+  keep = valid if keep is None else np.asarray(keep, bool) & valid
+  label_names = tuple(label_names) or ("default",)
+  labels = np.zeros(e, np.int32) if labels is None else np.asarray(labels, np.int32).reshape(e)
+  f32 = lambda a: np.asarray(a, np.float32)
+  ds = Dataset(
+      obs={k: np.asarray(v) for k, v in obs.items()}, actions=actions, rewards=f32(rewards),
+      dones=(steps == lengths[:, None] - 1).astype(np.float32), states=f32(states),
+      health={k: f32(v) for k, v in health.items()}, damage={k: f32(damage[k]) for k in DAMAGE_KINDS},
+      cost=f32(cost), keep=keep, lengths=lengths, success=np.asarray(success, bool).reshape(e),
+      safe=np.asarray(safe, bool).reshape(e), labels=labels, env_name=env_name,
+      env_config=config_json(env_config or {}), label_names=label_names)
+  for name, tree in (("obs", ds.obs), ("health", ds.health), ("damage", ds.damage),
+                     ("rewards", {"": ds.rewards}), ("states", {"": ds.states}), ("cost", {"": ds.cost})):
+    for k, v in tree.items():
+      if v.shape[:2] != (e, t):
+        raise ValueError(f"{name}{'/' + k if k else ''}: expected leading shape ({e}, {t}), got {v.shape}")
+  _check_self(ds)
+  return ds
+
+
+def num_transitions(ds: Dataset) -> int:
+  """Kept steps over all episodes."""
+  return int(np.sum(np.asarray(ds.keep)))
+
+
+def to_numpy(ds: Dataset) -> Dataset:
+  """``ds`` with every array on the host (numpy)."""
+  return ds.replace(**{f: _tree_np(getattr(ds, f)) for f in _ARRAY_FIELDS})
+
+
+def _tree_np(x):
+  if isinstance(x, dict):
+    return {k: np.asarray(v) for k, v in x.items()}
+  return np.asarray(x)
+
+
+_ARRAY_FIELDS = ("obs", "actions", "rewards", "dones", "states", "health", "damage", "cost", "keep",
+                 "lengths", "success", "safe", "labels")
+_EPISODE_FIELDS = ("lengths", "success", "safe", "labels")
+
+
+def select(ds: Dataset, episodes) -> Dataset:
+  """The episodes ``episodes`` (bool[E] mask or int indices) of ``ds``, padding unchanged."""
+  idx = np.asarray(episodes)
+  if idx.dtype == bool:
+    if idx.shape != (ds.num_episodes,):
+      raise ValueError(f"episodes: mask must be bool[{ds.num_episodes}], got shape {idx.shape}")
+    idx = np.flatnonzero(idx)
+  take = lambda a: np.asarray(a)[idx]
+  return ds.replace(**{f: (({k: take(v) for k, v in getattr(ds, f).items()}) if isinstance(getattr(ds, f), dict)
+                          else take(getattr(ds, f))) for f in _ARRAY_FIELDS})
+
+
+def concat(parts: Sequence[Dataset]) -> Dataset:
+  """Episodes of several datasets of one task, padded to the longest; labels merged by name."""
+  parts = [to_numpy(p) for p in parts]
+  if not parts:
+    raise ValueError("parts: need at least one dataset")
+  first = parts[0]
+  for p in parts[1:]:
+    _check_compatible(first, p, "parts")
+  names = tuple(dict.fromkeys(n for p in parts for n in p.label_names))
+  t_max = max(p.keep.shape[1] for p in parts)
+
+  def pad(a):
+    w = [(0, 0), (0, t_max - a.shape[1])] + [(0, 0)] * (a.ndim - 2)
+    return np.pad(a, w)
+
+  fields = {}
+  for f in _ARRAY_FIELDS:
+    if f in _EPISODE_FIELDS:
+      continue
+    if isinstance(getattr(first, f), dict):
+      fields[f] = {k: np.concatenate([pad(getattr(p, f)[k]) for p in parts]) for k in getattr(first, f)}
+    else:
+      fields[f] = np.concatenate([pad(getattr(p, f)) for p in parts])
+  for f in ("lengths", "success", "safe"):
+    fields[f] = np.concatenate([getattr(p, f) for p in parts])
+  fields["labels"] = np.concatenate([
+      np.asarray([names.index(p.label_names[i]) for i in p.labels], np.int32).reshape(-1) for p in parts])
+  return first.replace(label_names=names, **fields)
+
+
+def _check_compatible(a: Dataset, b: Dataset, where: str) -> None:
+  if a.env_name != b.env_name:
+    raise ValueError(f"{where}: datasets of different tasks: {a.env_name!r} vs {b.env_name!r}")
+  for f in ("obs", "health", "damage"):
+    if sorted(getattr(a, f)) != sorted(getattr(b, f)):
+      raise ValueError(f"{where}: {f} keys differ: {list(getattr(a, f))} vs {list(getattr(b, f))}")
+  if a.actions.shape[2:] != b.actions.shape[2:] or a.states.shape[2:] != b.states.shape[2:]:
+    raise ValueError(f"{where}: action/state sizes differ: {a.actions.shape[2:]}/{a.states.shape[2:]} "
+                     f"vs {b.actions.shape[2:]}/{b.states.shape[2:]}")
+
+
+def transitions(ds: Dataset) -> dict:
+  """The kept steps as flat numpy arrays ``[N, ...]``: obs (dict), actions, rewards, cost,
+  plus ``episode`` i32[N] and ``t`` i32[N] (where each came from)."""
+  ds = to_numpy(ds)
+  e, t = np.nonzero(ds.keep)
+  return {
+      "obs": {k: v[e, t] for k, v in ds.obs.items()},
+      "actions": ds.actions[e, t],
+      "rewards": ds.rewards[e, t],
+      "cost": ds.cost[e, t],
+      "episode": e.astype(np.int32),
+      "t": t.astype(np.int32),
+  }
+
+
+# --- files ------------------------------------------------------------------------
+
+def save(path: str, ds: Dataset, overwrite: bool = False) -> None:
+  """Write ``ds`` to ``path`` (atomic). Refuses an existing file unless ``overwrite``."""
+  path = os.fspath(path)
+  if os.path.exists(path) and not overwrite:
+    raise ValueError(f"{path}: exists; pass overwrite=True (CLI: --overwrite) to replace it")
+  ds = to_numpy(ds)
+  _check_self(ds)
+  with atomic_path(path, suffix=".hdf5") as tmp:
+    with h5py.File(tmp, "w") as f:
+      g = f.create_group("data")
+      g.attrs["env_name"] = ds.env_name
+      g.attrs["env_args"] = json.dumps({"env_name": ds.env_name, "type": "mjx_damage",
+                                        "env_kwargs": json.loads(ds.env_config)})
+      g.attrs["format"] = FORMAT
+      g.attrs["entity_names"] = json.dumps(list(ds.entity_names))
+      g.attrs["labels"] = json.dumps(list(ds.label_names))
+      g.attrs["total"] = 0
+      _write_demos(g, ds, start=0)
+
+
+def append(path: str, ds: Dataset) -> None:
+  """Add the episodes of ``ds`` to the dataset file ``path`` (same task and layout), atomically."""
+  path = os.fspath(path)
+  old = load(path, task=ds.env_name)
+  ds = to_numpy(ds)
+  _check_self(ds)
+  _check_compatible(old, ds, path)
+  names = tuple(dict.fromkeys(old.label_names + ds.label_names))
+  with atomic_path(path, suffix=".hdf5") as tmp:
+    shutil.copyfile(path, tmp)
+    with h5py.File(tmp, "r+") as f:
+      g = f["data"]
+      g.attrs["labels"] = json.dumps(list(names))
+      _write_demos(g, ds, start=old.num_episodes)
+
+
+def _write_demos(g, ds: Dataset, start: int) -> None:
+  total = int(g.attrs["total"])
+  for i in range(ds.num_episodes):
+    n = int(ds.lengths[i])
+    d = g.create_group(f"demo_{start + i}")
+    d.attrs["num_samples"] = n
+    d.attrs["success"] = bool(ds.success[i])
+    d.attrs["safe"] = bool(ds.safe[i])
+    d.attrs["label"] = ds.label_names[int(ds.labels[i])] if len(ds.label_names) else ""
+    for k in _STEP_ARRAYS:
+      _put(d, k, getattr(ds, k)[i, :n])
+    for sub in ("obs", "health", "damage"):
+      s = d.create_group(sub)
+      for k, v in getattr(ds, sub).items():
+        _put(s, k, v[i, :n])
+    total += n
+  g.attrs["total"] = total
+
+
+def _put(group, name: str, a: np.ndarray) -> None:
+  """A contiguous dataset ``group/name`` holding ``a``, through h5py's low-level API: the
+  high-level ``create_dataset`` costs ~1.5× more per call, and a file holds ~15 per episode."""
+  a = np.ascontiguousarray(a)
+  space = h5py.h5s.create_simple(a.shape) if a.ndim else h5py.h5s.create(h5py.h5s.SCALAR)
+  dset = h5py.h5d.create(group.id, name.encode(), h5py.h5t.py_create(a.dtype, logical=True), space)
+  if a.size:
+    dset.write(h5py.h5s.ALL, h5py.h5s.ALL, a)
+
+
+def _check_self(ds: Dataset) -> None:
+  if ds.num_episodes == 0:
+    raise ValueError("dataset: no episodes")
+  if set(ds.damage) != set(DAMAGE_KINDS):
+    raise ValueError(f"damage: keys must be {DAMAGE_KINDS}, got {tuple(ds.damage)}")
+  if not ds.env_name:
+    raise ValueError("env_name: empty")
+  if np.any(ds.lengths < 1) or np.any(ds.lengths > ds.keep.shape[1]):
+    raise ValueError(f"lengths: each must be in [1, {ds.keep.shape[1]}], got {ds.lengths.tolist()}")
+  if ds.label_names and (np.any(ds.labels < 0) or np.any(ds.labels >= len(ds.label_names))):
+    raise ValueError(f"labels: indices must be in [0, {len(ds.label_names)}), got {np.unique(ds.labels).tolist()}")
+
+
+def load(path: str, task: Optional[str] = None) -> Dataset:
+  """Read a dataset file into a :class:`Dataset` (numpy arrays, padded to the longest demo).
+
+  ``task``: expected task name (``ValueError`` if the file records another).
+  """
+  path = os.fspath(path)
+  if not os.path.exists(path):
+    raise ValueError(f"{path}: no such file")
+  if not os.path.isfile(path):
+    raise ValueError(f"{path}: not a file")
+  try:
+    f = h5py.File(path, "r")
+  except OSError as e:
+    raise ValueError(f"{path}: not an HDF5 file, or truncated ({e})") from None
+  with f:
+    try:
+      return _read(f, path, task)
+    except KeyError as e:
+      raise ValueError(f"{path}: wrong layout: {e}") from None
+
+
+def _read(f, path: str, task: Optional[str]) -> Dataset:
+  if "data" not in f or not isinstance(f["data"], h5py.Group):
+    raise ValueError(f"{path}: wrong layout: no 'data' group (robomimic layout: data/demo_<i>/...)")
+  g = f["data"]
+  for a in ("env_name", "entity_names", "labels"):
+    if a not in g.attrs:
+      raise ValueError(f"{path}: wrong layout: data.attrs lacks {a!r} (not written by mjx_damage.data?)")
+  env_name = str(g.attrs["env_name"])
+  if task is not None and env_name != task:
+    raise ValueError(f"{path}: dataset of task {env_name!r}, expected {task!r}")
+  env_args = json.loads(g.attrs.get("env_args", "{}"))
+  entities = json.loads(g.attrs["entity_names"])
+  label_names = tuple(json.loads(g.attrs["labels"]))
+  demos = sorted((k for k in g if k.startswith("demo_")), key=lambda k: int(k.split("_")[1]))
+  if not demos:
+    raise ValueError(f"{path}: no demos in 'data' (empty dataset)")
+  first = g[demos[0]]
+  if "obs" not in first:
+    raise ValueError(f"{path}: wrong layout: {demos[0]} has no 'obs' group")
+  obs_keys = list(first["obs"])
+  lengths = np.asarray([int(g[k].attrs["num_samples"]) for k in demos], np.int32)
+  t_max = int(lengths.max())
+
+  def stack(key):
+    out = None
+    for i, k in enumerate(demos):
+      if key not in g[k]:
+        raise ValueError(f"{path}: {k} lacks {key!r}")
+      a = g[k][key][()]
+      if a.shape[0] != lengths[i]:
+        raise ValueError(f"{path}: {k}/{key} has {a.shape[0]} steps, num_samples says {lengths[i]}")
+      if out is None:
+        out = np.zeros((len(demos), t_max) + a.shape[1:], a.dtype)
+      elif a.shape[1:] != out.shape[2:]:
+        raise ValueError(f"{path}: {k}/{key} has shape {a.shape}, other demos {out.shape[2:]} per step")
+      out[i, : lengths[i]] = a
+    return out
+
+  labels_attr = [str(g[k].attrs.get("label", "")) for k in demos]
+  for lab in labels_attr:
+    if label_names and lab not in label_names:
+      raise ValueError(f"{path}: demo label {lab!r} not in data.attrs labels {list(label_names)}")
+  return Dataset(
+      obs={k: stack(f"obs/{k}") for k in obs_keys},
+      actions=stack("actions"),
+      rewards=stack("rewards"),
+      dones=stack("dones"),
+      states=stack("states"),
+      health={e: stack(f"health/{e}") for e in entities},
+      damage={k: stack(f"damage/{k}") for k in DAMAGE_KINDS},
+      cost=stack("cost"),
+      keep=stack("keep").astype(bool),
+      lengths=lengths,
+      success=np.asarray([bool(g[k].attrs["success"]) for k in demos]),
+      safe=np.asarray([bool(g[k].attrs["safe"]) for k in demos]),
+      labels=np.asarray([label_names.index(lab) if label_names else 0 for lab in labels_attr], np.int32),
+      env_name=env_name,
+      env_config=config_json(env_args.get("env_kwargs", {})),
+      label_names=label_names,
+  )

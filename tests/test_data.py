@@ -1,0 +1,149 @@
+"""mjx_damage.data: lossless HDF5 round trip in the robomimic layout, append, and bad-input errors."""
+
+import h5py
+import jax
+import numpy as np
+import pytest
+
+from mjx_damage import data as D
+
+
+def hand_made(e=5, t=7, seed=0, env_name="pick_egg", labels=("careful", "careless")):
+  """A dataset with random contents; steps past each length are zero (as a loaded file pads them)."""
+  r = np.random.default_rng(seed)
+  lengths = r.integers(1, t + 1, size=e)
+  lengths[0] = t
+  valid = np.arange(t)[None, :] < lengths[:, None]
+
+  def arr(*shape, dtype=np.float32):
+    a = r.normal(size=(e, t) + shape).astype(dtype)
+    return a * valid.reshape(valid.shape + (1,) * len(shape))
+
+  return D.build(
+      env_name=env_name, env_config={"episode_length": t, "damage_weight": 0.0},
+      obs={"state": arr(6), "eef_pos": arr(3)}, actions=arr(4), rewards=arr(), states=arr(9),
+      health={"egg": (100 - np.abs(arr())) * valid, "agent": (100 - np.abs(arr())) * valid},
+      damage={k: np.abs(arr()) for k in D.DAMAGE_KINDS}, cost=np.abs(arr()), lengths=lengths,
+      success=r.random(e) < 0.5, safe=r.random(e) < 0.5, labels=r.integers(0, len(labels), e),
+      label_names=labels)
+
+
+def assert_same(a: D.Dataset, b: D.Dataset):
+  la, lb = [jax_leaves(x) for x in (a, b)]
+  assert len(la) == len(lb)
+  for (pa, xa), (pb, xb) in zip(la, lb):
+    assert pa == pb
+    assert xa.dtype == xb.dtype, pa
+    np.testing.assert_array_equal(xa, xb, err_msg=str(pa))
+  assert (a.env_name, a.env_config, a.label_names) == (b.env_name, b.env_config, b.label_names)
+
+
+def jax_leaves(ds):
+  return [(jax.tree_util.keystr(p), np.asarray(x)) for p, x in jax.tree_util.tree_leaves_with_path(ds)]
+
+
+def test_round_trip_is_lossless(tmp_path):
+  ds = hand_made()
+  path = tmp_path / "demos.hdf5"
+  D.save(path, ds)
+  assert_same(ds, D.load(path, task="pick_egg"))
+
+
+def test_file_is_robomimic_layout(tmp_path):
+  ds = hand_made()
+  path = tmp_path / "demos.hdf5"
+  D.save(path, ds)
+  with h5py.File(path, "r") as f:
+    g = f["data"]
+    assert g.attrs["total"] == int(ds.lengths.sum())
+    assert g.attrs["env_name"] == "pick_egg"
+    n = int(ds.lengths[1])
+    demo = g["demo_1"]
+    assert demo.attrs["num_samples"] == n
+    assert demo["actions"].shape == (n, 4) and demo["obs/state"].shape == (n, 6)
+    assert demo["dones"][-1] == 1 and demo["dones"][:-1].sum() == 0
+    assert set(demo["damage"]) == set(D.DAMAGE_KINDS) and set(demo["health"]) == {"egg", "agent"}
+
+
+def test_append_and_concat_agree(tmp_path):
+  a, b = hand_made(seed=1), hand_made(e=3, t=9, seed=2, labels=("careless", "other"))
+  path = tmp_path / "demos.hdf5"
+  D.save(path, a)
+  D.append(path, b)
+  both = D.load(path)
+  assert both.num_episodes == 8 and both.label_names == ("careful", "careless", "other")
+  assert_same(D.concat([a, b]), both)
+  with h5py.File(path, "r") as f:
+    assert f["data"].attrs["total"] == int(a.lengths.sum() + b.lengths.sum())
+
+
+def test_transitions_and_select():
+  ds = hand_made()
+  tr = D.transitions(ds)
+  assert tr["actions"].shape == (int(ds.lengths.sum()), 4) == (D.num_transitions(ds), 4)
+  np.testing.assert_array_equal(tr["actions"][0], ds.actions[0, 0])
+  sub = D.select(ds, np.asarray(ds.success))
+  assert sub.num_episodes == int(np.sum(ds.success))
+
+
+def test_save_refuses_existing_file(tmp_path):
+  path = tmp_path / "demos.hdf5"
+  D.save(path, hand_made())
+  before = path.read_bytes()
+  with pytest.raises(ValueError, match="exists; pass overwrite"):
+    D.save(path, hand_made(seed=3))
+  assert path.read_bytes() == before
+  D.save(path, hand_made(seed=3), overwrite=True)
+  assert path.read_bytes() != before
+
+
+def test_bad_files_name_the_cause(tmp_path):
+  with pytest.raises(ValueError, match="no such file"):
+    D.load(tmp_path / "missing.hdf5")
+  text = tmp_path / "text.hdf5"
+  text.write_text("not hdf5")
+  with pytest.raises(ValueError, match="text.hdf5: not an HDF5 file, or truncated"):
+    D.load(text)
+  good = tmp_path / "good.hdf5"
+  D.save(good, hand_made())
+  cut = tmp_path / "cut.hdf5"
+  cut.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+  with pytest.raises(ValueError, match="cut.hdf5: "):
+    D.load(cut)
+  other = tmp_path / "other.hdf5"
+  with h5py.File(other, "w") as f:
+    f.create_group("stuff")
+  with pytest.raises(ValueError, match="wrong layout: no 'data' group"):
+    D.load(other)
+  with pytest.raises(ValueError, match="dataset of task 'pick_egg', expected 'pour_water'"):
+    D.load(good, task="pour_water")
+  with pytest.raises(ValueError, match="of different tasks"):
+    D.concat([hand_made(), hand_made(env_name="x")])
+  with h5py.File(good, "r+") as f:
+    del f["data/demo_2/cost"]
+  with pytest.raises(ValueError, match="demo_2 lacks 'cost'"):
+    D.load(good)
+  empty = tmp_path / "empty.hdf5"
+  with h5py.File(empty, "w") as f:
+    g = f.create_group("data")
+    g.attrs.update({"env_name": "pick_egg", "entity_names": "[]", "labels": "[]"})
+  with pytest.raises(ValueError, match="no demos"):
+    D.load(empty)
+
+
+def test_append_refuses_other_task(tmp_path):
+  path = tmp_path / "demos.hdf5"
+  D.save(path, hand_made())
+  with pytest.raises(ValueError, match="expected 'pour_water'"):
+    D.append(path, hand_made(env_name="pour_water"))
+
+
+def test_build_checks_shapes():
+  ds = hand_made()
+  with pytest.raises(ValueError, match="lengths: expected"):
+    D.build(env_name="x", obs=ds.obs, actions=ds.actions, rewards=ds.rewards, states=ds.states,
+            health=ds.health, damage=ds.damage, cost=ds.cost, lengths=[1, 2], success=ds.success, safe=ds.safe)
+  with pytest.raises(ValueError, match="obs/state: expected leading shape"):
+    D.build(env_name="x", obs={"state": ds.obs["state"][:, :3]}, actions=ds.actions, rewards=ds.rewards,
+            states=ds.states, health=ds.health, damage=ds.damage, cost=ds.cost, lengths=ds.lengths,
+            success=ds.success, safe=ds.safe)
