@@ -189,7 +189,7 @@ def run_task(task, args, log):
   else:
     train = lambda ds: bc.train_bc(ds, seeds, args.steps, args.batch, hidden=args.hidden)
     apply = bc.bc_apply(env.action_size, args.hidden)
-  evaluator = E.Evaluator(env, E.parametrized_policy(apply, None), E.episode_length_of(env, task))
+  evaluator = E.Evaluator(env, E.parametrized_policy(apply, None), E.env_episode_length(env))
   keys = E.episode_keys(0, args.eval_episodes)
   out["regimes"] = {}
   t_train = t_eval = 0.0

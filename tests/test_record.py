@@ -1,19 +1,21 @@
-"""train.record: the CLI refuses bad input before compiling; recording through the batched step (slow)."""
+"""mjx-damage record (apps.record_cli) refuses bad input before compiling; train.record through the batched step (slow)."""
 
 import numpy as np
 import pytest
 
 from mjx_damage import data as D
+from apps import cli
 from train import record as R
 
 
 def test_cli_refuses_existing_out_without_overwrite(tmp_path, capsys):
   out = tmp_path / "demos.hdf5"
   out.write_bytes(b"keep me")
-  rc = R.main(["--task", "pick_egg", "--policy", "operator:careful", "--episodes", "4", "--out", str(out)])
+  rc = cli.main(["record", "--task", "pick_egg", "--policy", "operator:careful", "--episodes", "4", "--out", str(out)])
   assert rc == 2 and out.read_bytes() == b"keep me"
   err = capsys.readouterr().err.strip()
-  assert err == f"error: out: {out} exists; pass --overwrite to replace it"
+  assert err == (f"mjx-damage record: error: --out: {out} already exists; pass --overwrite to replace it, "
+                 "or choose another --out")
 
 
 @pytest.mark.parametrize("argv, msg", [
@@ -22,7 +24,7 @@ def test_cli_refuses_existing_out_without_overwrite(tmp_path, capsys):
     (["--task", "pick_egg", "--policy", "scripted:fast"], "policy: unknown policy 'scripted:fast'"),
 ])
 def test_cli_rejects_bad_specs(tmp_path, capsys, argv, msg):
-  rc = R.main(argv + ["--episodes", "2", "--out", str(tmp_path / "x.hdf5")])
+  rc = cli.main(["record"] + argv + ["--episodes", "2", "--out", str(tmp_path / "x.hdf5")])
   assert rc == 2 and msg in capsys.readouterr().err
   assert not (tmp_path / "x.hdf5").exists()
 

@@ -2,7 +2,7 @@
 
 Python API::
 
-    from train.record import record, make_recorder_policy
+    from train.record import record
     env = tasks.make("pick_egg")
     ds = record(env, tasks.operators.careless(env), episodes=256, seed=0, task="pick_egg")
     mjx_damage.data.save("demos.hdf5", ds)
@@ -18,21 +18,12 @@ some step) and safe (every entity's final health above the env's safe
 threshold). Episodes run their full length (as the evaluator runs them), so a
 policy learns what to do after completing the task too.
 
-CLI (``main(argv)``; wired as ``mjx-damage record``)::
-
-    record --task pick_egg --policy operator:careless --episodes 256 --out demos.hdf5 [--overwrite]
-
-Policy specs: ``operator:careful``, ``operator:careless``, ``operator:mixed``
-(:mod:`tasks.operators`) and every spec of :func:`train.evaluate.make_policy`
-(``scripted:safe``, ``scripted:unsafe``, ``random``, ``zero``, ``checkpoint:PATH``).
+The command line is ``mjx-damage record`` (:mod:`apps.record_cli`), which resolves
+task and policy names.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import sys
 import time
 from typing import Optional
 
@@ -40,12 +31,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import tasks
 from mjx_damage import data as D
 from tasks import operators
 from train import evaluate as E
 
-DEFAULT_CHUNK = 256  # episodes per compiled call (XLA:CPU stalls on >= 512 batched MJX envs here)
+DEFAULT_CHUNK = 256  # episodes per compiled call: bounds memory, one executable for all chunks
 
 
 def as_operator(policy, label: str = "policy") -> operators.Operator:
@@ -96,7 +86,7 @@ def record(env, policy, episodes: int, seed: int = 0, *, task: str, episode_leng
   for name, v in (("episodes", episodes), ("chunk", chunk)):
     if isinstance(v, bool) or not isinstance(v, int) or v < 1:
       raise ValueError(f"{name}: must be an int >= 1, got {v!r}")
-  T = episode_length if episode_length is not None else E.episode_length_of(env, task)
+  T = episode_length if episode_length is not None else E.env_episode_length(env)
   op = as_operator(policy)
   label = label or op.label
   chunk = min(chunk, episodes)
@@ -119,71 +109,3 @@ def record(env, policy, episodes: int, seed: int = 0, *, task: str, episode_leng
       damage=steps["damage"], cost=steps["cost"], lengths=np.full(episodes, T),
       success=success, safe=np.all(final_h > getattr(env, "safe_threshold", 95.0), axis=-1),
       labels=np.zeros(episodes, np.int32), label_names=(label,))
-
-
-def make_recorder_policy(spec: str, env):
-  """A policy spec string → an Operator or a ``policy(state, rng)`` (see the module docstring)."""
-  kind, _, arg = spec.partition(":")
-  if kind == "operator":
-    return operators.make(env, arg)
-  return E.make_policy(spec, env)
-
-
-def check_spec(spec: str) -> None:
-  kind, _, arg = spec.partition(":")
-  if kind == "operator":
-    if arg not in operators.CONDITIONS:
-      raise ValueError(f"policy: unknown operator {arg!r}; valid: "
-                       + ", ".join(f"operator:{c}" for c in operators.CONDITIONS))
-    return
-  E.parse_policy_spec(spec)
-
-
-def build_parser() -> argparse.ArgumentParser:
-  p = argparse.ArgumentParser(prog="mjx-damage record", description=__doc__.split("\n\n")[0])
-  p.add_argument("--task", required=True, help=f"task name ({', '.join(tasks.names())})")
-  p.add_argument("--policy", required=True,
-                 help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint:PATH")
-  p.add_argument("--episodes", type=int, required=True)
-  p.add_argument("--out", required=True, help="output .hdf5 (robomimic layout)")
-  p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
-  p.add_argument("--seed", type=int, default=0)
-  p.add_argument("--episode-length", type=int, default=None, help="default: the task's")
-  p.add_argument("--chunk", type=int, default=DEFAULT_CHUNK, help="episodes per compiled call")
-  return p
-
-
-def main(argv=None) -> int:
-  args = build_parser().parse_args(argv)
-  try:
-    if os.path.exists(args.out) and not args.overwrite:
-      raise ValueError(f"out: {args.out} exists; pass --overwrite to replace it")
-    E.check_task(args.task)
-    check_spec(args.policy)
-    for name in ("episodes", "chunk"):
-      if getattr(args, name) < 1:
-        raise ValueError(f"{name}: must be >= 1, got {getattr(args, name)}")
-    if args.episode_length is not None and args.episode_length < 1:
-      raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
-  except ValueError as e:
-    print(f"error: {e}", file=sys.stderr)
-    return 2
-  env = E.make_task(args.task)
-  policy = make_recorder_policy(args.policy, env)
-  t0 = time.perf_counter()
-  ds = record(env, policy, args.episodes, args.seed, task=args.task, episode_length=args.episode_length,
-              chunk=args.chunk, label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))
-  rec_s = time.perf_counter() - t0
-  D.save(args.out, ds, overwrite=args.overwrite)
-  total_s = time.perf_counter() - t0
-  n = D.num_transitions(ds)
-  print(json.dumps({"out": args.out, "episodes": ds.num_episodes, "transitions": n,
-                    "success_rate": float(np.mean(ds.success)), "safe_rate": float(np.mean(ds.safe)),
-                    "safe_success_rate": float(np.mean(ds.success & ds.safe)),
-                    "record_s_incl_compile": round(rec_s, 2), "save_s": round(total_s - rec_s, 2),
-                    "total_s": round(total_s, 2), "transitions_per_s": round(n / total_s, 1)}))
-  return 0
-
-
-if __name__ == "__main__":
-  sys.exit(main())

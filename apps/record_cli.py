@@ -1,0 +1,106 @@
+"""``mjx-damage record``: N episodes of a policy or operator → a robomimic-layout HDF5 dataset.
+
+    mjx-damage record --task pick_egg --policy operator:careless --episodes 256 --out demos.hdf5
+
+Policy specs: ``operator:careful``, ``operator:careless``, ``operator:mixed``
+(:mod:`tasks.operators`) and every spec of :mod:`apps.resolve` (``scripted:safe``,
+``scripted:unsafe``, ``random``, ``zero``, ``checkpoint:RUN``). Without ``--out`` the
+dataset goes to a new ``runs/record-<task>-<time>/demos.hdf5``; an existing file is
+refused unless ``--overwrite`` is given. Recording itself: :func:`train.record.record`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+from apps import resolve as R
+from mjx_damage import outputs
+from tasks import operators
+from train.cliargs import Parser
+from train.record import DEFAULT_CHUNK
+
+COMPILE_S = {"cpu": 30, "gpu": 60}  # rough first compile of one task's recording program, s
+
+
+def make_recorder_policy(spec: str, env):
+  """A policy spec string → an Operator or a ``policy(state, rng)``."""
+  kind, _, arg = spec.partition(":")
+  if kind == "operator":
+    return operators.make(env, arg)
+  return R.make_policy(spec, env)
+
+
+def check_spec(spec: str) -> None:
+  kind, _, arg = spec.partition(":")
+  if kind == "operator":
+    if arg not in operators.CONDITIONS:
+      raise ValueError(f"policy: unknown operator {arg!r}; valid: "
+                       + ", ".join(f"operator:{c}" for c in operators.CONDITIONS))
+    return
+  R.parse_policy_spec(spec)
+
+
+def build_parser() -> Parser:
+  p = Parser(prog="mjx-damage record", description=__doc__.split("\n\n")[0])
+  p.add_argument("--task", required=True, help="registered task name")
+  p.add_argument("--policy", required=True,
+                 help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint:RUN")
+  p.add_argument("--episodes", type=int, required=True, help="episodes to record")
+  p.add_argument("--out", default=None, help="output .hdf5 (default: runs/record-<task>-<time>/demos.hdf5)")
+  p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
+  p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
+  p.add_argument("--chunk", type=int, default=DEFAULT_CHUNK, help="episodes per compiled call")
+  return p
+
+
+def main(argv=None) -> int:
+  ap = build_parser()
+  args = ap.parse_args(argv)
+  try:  # everything the user gave is checked before a task is built or compiled
+    if args.out is not None:
+      outputs.check_new([args.out], "--out", args.overwrite)
+    R.check_task(args.task)
+    check_spec(args.policy)
+    for name in ("episodes", "chunk"):
+      if getattr(args, name) < 1:
+        raise ValueError(f"{name}: must be >= 1, got {getattr(args, name)}")
+    if args.episode_length is not None and args.episode_length < 1:
+      raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
+  except ValueError as e:
+    ap.error(str(e))
+  import jax  # after the argument checks: a bad command line answers without starting JAX
+  import numpy as np
+
+  from mjx_damage import data as D
+  from train.record import record
+
+  out = args.out or os.path.join(outputs.run_dir("record", args.task), "demos.hdf5")
+  env = R.make_task(args.task)
+  policy = make_recorder_policy(args.policy, env)
+  platform = jax.default_backend()
+  print(f"record: task {args.task}, policy {args.policy}, {args.episodes} episodes, device {platform}; "
+        f"output {out}", flush=True)
+  print(f"compiling, about {COMPILE_S.get(platform, 60)} s the first time (seconds once cached) ...", flush=True)
+  t0 = time.perf_counter()
+  ds = record(env, policy, args.episodes, args.seed, task=args.task,
+              episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
+              label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))
+  rec_s = time.perf_counter() - t0
+  D.save(out, ds, overwrite=args.overwrite)
+  total_s = time.perf_counter() - t0
+  n = D.num_transitions(ds)
+  print(json.dumps({"out": out, "episodes": ds.num_episodes, "transitions": n,
+                    "success_rate": float(np.mean(ds.success)), "safe_rate": float(np.mean(ds.safe)),
+                    "safe_success_rate": float(np.mean(ds.success & ds.safe)),
+                    "record_s_incl_compile": round(rec_s, 2), "save_s": round(total_s - rec_s, 2),
+                    "total_s": round(total_s, 2), "transitions_per_s": round(n / total_s, 1)}))
+  print(f"outputs: {out}")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
