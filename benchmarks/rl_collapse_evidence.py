@@ -72,7 +72,7 @@ def main() -> int:
             "dimension, gripper included) — ×w = 2 that outweighs the whole dense task return (≈ −54). The cheapest way out is to stop moving and keep the gripper "
             "shut, which also never reaches the release that success needs.", "",
             "Reruns of the penalty command on main ended at 61.3 M and 75.5 M env-steps with 0 % completion "
-            "(shared/evidence/rl-rerun.md): the escape from the plateau is a stochastic event late in the "
+            "(two H100 reruns of the committed command, 2026-11-22): the escape from the plateau is a stochastic event late in the "
             "300 s budget, so one seed either finds it (committed 90.5 %) or not (0 %).", "",
            "## 2. SGD work per env step: old GPU settings vs the presets", ""]
   old = None

@@ -4,7 +4,7 @@ For each method, ``train.train(task, seeds=S, time_limit=--budget-seconds)`` tra
 seeds in one compiled program (vmap over the seed axis), with periodic deterministic
 evaluations (``--eval-envs`` episodes per seed) for the curves and the time to 80 %
 safe; then every seed's final deterministic policy is scored by ``train.evaluate`` on
-``--eval-episodes`` episodes (seed 12345, as shared/evidence/rl-cross-trainer.md).
+``--eval-episodes`` episodes (seed 12345, the same key as benchmarks/rl_brax_ppo.py).
 Each row: mean ± std and min over seeds of completion, safe completion, avg env
 health, episode cost; time to ≥ 80 % safe (with ≥ 80 % completion); env-steps/s of
 the whole S-seed program; and the exact command that produced it.

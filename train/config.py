@@ -7,7 +7,8 @@ Presets (``PPOConfig.preset(name, **overrides)``, ``mjx-damage train --preset NA
   2048 envs, 32 minibatches of 512 sequences, 8 epochs per batch, unroll 10,
   γ 0.97, lr 1e-3, entropy 2e-2, observation normalisation, policy MLP 32×4,
   value MLP 256×5 (swish). Brax's own trainer with these settings reaches
-  99 % safe on place_plate (shared/evidence/rl-cross-trainer.md).
+  99 % safe on the old place_plate in-hand start (one H100, before the task change of
+  docs/rl_task_design.md; runs on the current task: benchmarks/rl_brax_ppo.py).
 * ``paper`` — the oopsieverse paper's PPO appendix table: actor and critic MLP
   512×2 tanh, Gaussian + tanh squashing, initial log-std −0.5 (arm) / −1.5
   (gripper = last action dimension), lr 1e-3 linearly annealed to 0, rollout
