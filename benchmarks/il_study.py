@@ -41,7 +41,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import platform
 import shlex
 import sys
 import time
@@ -49,6 +48,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cache"))
+
+from mjx_damage import runtime  # noqa: E402
 
 TASKS = ("shelve_item", "pick_egg", "add_firewood", "pour_water", "wipe_counter")
 REGIMES = ("careless", "careful", "all", "filtered_episodes", "filtered_datapoints")
@@ -109,16 +110,7 @@ def parse(argv):
   return args
 
 
-def device_info():
-  import jax
-
-  d = jax.devices()[0]
-  kind = getattr(d, "device_kind", d.platform)
-  slug = "cpu" if d.platform == "cpu" else "".join(c if c.isalnum() else "_" for c in kind.lower()).strip("_")
-  name = f"{kind} ({d.platform}, {jax.device_count()} device(s))"
-  if d.platform == "cpu":
-    name = f"{platform.processor() or platform.machine()} CPU, {os.cpu_count()} cores"
-  return slug, name
+device_info = runtime.device_info  # (slug, description) of the first JAX device
 
 
 def interval(values):
@@ -164,7 +156,7 @@ def run_task(task, args, log):
   import tasks
   from mjx_damage import data as D
   from tasks import operators
-  from train import bc, curate, flow_policy, imitation
+  from train import bc, flow_policy, imitation
   from train import evaluate as E
   from train.record import record
 

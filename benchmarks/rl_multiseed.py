@@ -37,7 +37,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import shlex
 import sys
 import time
@@ -46,7 +45,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cache"))
 
-from mjx_damage import io  # noqa: E402
+from mjx_damage import io, runtime  # noqa: E402
 
 METHODS = ("task_only", "penalty", "lagrangian", "pid", "paper", "paper_task_only")
 EVAL_SEED = 12345
@@ -118,16 +117,7 @@ def parse(argv):
   return args
 
 
-def device_info():
-  import jax
-
-  d = jax.devices()[0]
-  kind = getattr(d, "device_kind", d.platform)
-  slug = "cpu" if d.platform == "cpu" else "".join(c if c.isalnum() else "_" for c in kind.lower()).strip("_")
-  name = f"{kind} ({d.platform}, {jax.device_count()} device(s))"
-  if d.platform == "cpu":
-    name = f"{platform.processor() or platform.machine()} CPU, {os.cpu_count()} cores ({kind})"
-  return slug, name
+device_info = runtime.device_info  # (slug, description) of the first JAX device
 
 
 def size_overrides(preset: str, args) -> dict:

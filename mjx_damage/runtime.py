@@ -111,3 +111,20 @@ def enable_compilation_cache() -> str | None:
   jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
   jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
   return path
+
+
+def device_info() -> tuple[str, str]:
+  """(slug, description) of JAX's first device, for results file names and headers.
+
+  slug: ``"cpu"`` or the device kind in lower case with ``_`` (``nvidia_h100_80gb_hbm3``).
+  """
+  import platform
+
+  import jax
+
+  d = jax.devices()[0]
+  kind = getattr(d, "device_kind", d.platform)
+  if d.platform == "cpu":
+    return "cpu", f"{platform.processor() or platform.machine()} CPU, {os.cpu_count()} cores ({kind})"
+  slug = "".join(c if c.isalnum() else "_" for c in kind.lower()).strip("_")
+  return slug, f"{kind} ({d.platform}, {jax.device_count()} device(s))"
