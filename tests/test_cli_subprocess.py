@@ -4,7 +4,8 @@ directory, tiny sizes.
 * nothing appears there but ``runs/`` (no ``--out``) or the paths asked for;
 * a second identical ``train --out`` exits 2 in one line and leaves the first run's files byte-identical;
 * SIGINT while ``train`` compiles ends with status 130, one ``interrupted; …`` line, no traceback;
-* SIGINT during training does the same and leaves a readable checkpoint.
+* SIGINT during training does the same and leaves a readable checkpoint;
+* SIGKILL at a random moment, then ``--resume``, ends bitwise equal to an uninterrupted run.
 
 The trainer runs on ``train.experiments.pusher:PusherEnv`` (one contact pair: compiles in seconds).
 """
@@ -132,3 +133,44 @@ def test_sigint_during_training_keeps_a_checkpoint(tmp_path):
   from train import checkpoint as ckpt
   meta = ckpt.read_meta(str(tmp_path / "r" / ckpt.FILENAME))
   assert 1 <= meta["iteration"] < 1000
+
+
+def test_sigkill_then_resume_ends_bitwise_equal_to_an_uninterrupted_run(tmp_path):
+  """Crash safety (issue 19): SIGKILL at a random moment after the first checkpoint, then ``--resume``,
+  gives the same final train state, bit for bit on CPU, as a run that was never interrupted."""
+  import random
+
+  import numpy as np
+
+  from train import checkpoint as ckpt
+
+  args = list(TRAIN)
+  args[args.index("--timesteps") + 1] = "4800"  # 75 iterations of 64 env steps
+  args += ["--checkpoint-every", "640", "--eval-every", "1600"]  # a checkpoint every 10 iterations
+  full = _run(args + ["--out", "full"], tmp_path)
+  assert full.returncode == 0, full.stderr[-2000:]
+
+  proc = subprocess.Popen([sys.executable, "-m", "apps.cli", *args, "--out", "killed"], cwd=tmp_path,
+                          env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+  target = tmp_path / "killed" / ckpt.FILENAME
+  try:
+    deadline = time.time() + 240
+    while not target.exists() and proc.poll() is None and time.time() < deadline:
+      time.sleep(0.05)
+    assert target.exists(), "no checkpoint before the run ended"
+    time.sleep(random.uniform(0.0, 0.5))  # a random moment: mid-iteration, mid-write or between them
+    proc.kill()
+    proc.wait(timeout=30)
+  finally:
+    if proc.poll() is None:
+      proc.kill()
+  killed_at = ckpt.read_meta(str(target))["iteration"]
+  assert killed_at < 75, "the run ended before the kill: nothing was tested"
+  resumed = _run(args + ["--out", "killed", "--resume"], tmp_path)
+  assert resumed.returncode == 0, resumed.stderr[-2000:]
+
+  a, b = np.load(tmp_path / "full" / ckpt.FILENAME), np.load(target)
+  keys = sorted(k for k in a.files if k != "meta")
+  assert keys == sorted(k for k in b.files if k != "meta") and keys
+  for k in keys:
+    np.testing.assert_array_equal(a[k], b[k], err_msg=f"{k} (killed after iteration {killed_at})")
