@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from train.cliargs import Parser
+from train.cliargs import Parser, say_compiling
 
 
 def main(argv=None) -> int:
@@ -43,7 +43,7 @@ def main(argv=None) -> int:
 
   print(f"demo: drop scene, {args.envs} envs x {steps} steps, device {jax.default_backend()} x "
         f"{jax.device_count()}; writes no file", flush=True)
-  print("compiling, about 20 s the first time (seconds once cached) ...", flush=True)
+  say_compiling({"cpu": 20, "gpu": 20}, jax.default_backend())
   t0 = time.perf_counter()
   compiled = rollout.lower(jax.random.PRNGKey(args.seed)).compile()
   t1 = time.perf_counter()
@@ -64,7 +64,7 @@ def main(argv=None) -> int:
       continue
     cols = " ".join(f"{health[sel, i].mean():>14.1f}" for i in range(len(names)))
     print(f"{lo:>7.2f} - {hi:<7.2f} {int(sel.sum()):>5} {cols}")
-  print(f"\nall envs: " + ", ".join(f"{n} mean {health[:, i].mean():.1f} min {health[:, i].min():.1f}"
+  print("\nall envs: " + ", ".join(f"{n} mean {health[:, i].mean():.1f} min {health[:, i].min():.1f}"
                                   for i, n in enumerate(names)))
   print(f"zero-damage episodes: {100 * (1 - np.asarray(damaged).mean()):.0f} %")
   return 0

@@ -17,7 +17,7 @@ from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json
 from train import evaluate as E
-from train.cliargs import Parser
+from train.cliargs import Parser, say_compiling
 
 # Rough first-compile times of a task's evaluation (s; the persistent cache makes later runs start in seconds).
 COMPILE_S = {"cpu": 40, "gpu": 60}
@@ -59,7 +59,7 @@ def main(argv=None) -> int:
   print(f"eval: task {args.task}, policy {args.policy}, {args.episodes} episodes x {episode_length} steps, "
         f"fragility {args.fragility:g}, seed {args.seed}, device {platform} x {jax.device_count()}; "
         f"output {out}", flush=True)
-  print(f"compiling, about {COMPILE_S.get(platform, 60)} s the first time (seconds once cached) ...", flush=True)
+  say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
   res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
                    episode_length=episode_length,

@@ -19,7 +19,7 @@ import time
 from apps import resolve as R
 from mjx_damage import outputs
 from tasks import operators
-from train.cliargs import Parser
+from train.cliargs import Parser, say_compiling
 from train.record import DEFAULT_CHUNK
 
 COMPILE_S = {"cpu": 30, "gpu": 60}  # rough first compile of one task's recording program, s
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
   platform = jax.default_backend()
   print(f"record: task {args.task}, policy {args.policy}, {args.episodes} episodes, device {platform}; "
         f"output {out}", flush=True)
-  print(f"compiling, about {COMPILE_S.get(platform, 60)} s the first time (seconds once cached) ...", flush=True)
+  say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
   ds = record(env, policy, args.episodes, args.seed, task=args.task,
               episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,

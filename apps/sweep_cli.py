@@ -16,7 +16,7 @@ from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json, write_text
 from train import sweep as S
-from train.cliargs import Parser
+from train.cliargs import Parser, say_compiling
 
 COMPILE_S = {"cpu": 40, "gpu": 60}  # rough first compile of one task's evaluation, s
 
@@ -76,8 +76,7 @@ def main(argv=None) -> int:
   print(f"sweep: tasks {', '.join(tasks)} x policies {', '.join(policies)} x seeds {seeds} x fragility {levels}, "
         f"{args.episodes} episodes each, device {platform} x {jax.device_count()}; outputs {out_path}, {md_path}",
         flush=True)
-  print(f"compiling, about {COMPILE_S.get(platform, 60)} s per task and policy the first time "
-        "(seconds once cached) ...", flush=True)
+  say_compiling(COMPILE_S, platform, "per task and policy the first time")
   t0 = time.perf_counter()
 
   def write(res, complete):

@@ -28,7 +28,7 @@ import sys
 
 from mjx_damage import outputs
 from train import checkpoint as ckpt
-from train.cliargs import Parser
+from train.cliargs import Parser, say_compiling
 from train.config import MULTIPLIERS, PRESETS, PPOConfig
 
 # No accelerator and no size flag: a run sized to show learning curves on a laptop CPU, not to solve the task.
@@ -245,7 +245,7 @@ def main(argv=None) -> int:
   print(f"train: task {task}, preset {args['preset']}, {cfg.num_envs} envs x {cfg.num_timesteps:,} env steps "
         f"per seed{size}, seeds {list(cfg.seeds)}, device {platform} x {jax.device_count()}; "
         f"run directory {args['out_dir']}{' (resuming)' if args['resume'] else ''}", flush=True)
-  print(f"compiling, about {COMPILE_S.get(platform, 90)} s the first time (less once cached) ...", flush=True)
+  say_compiling(COMPILE_S, platform, default=90)
   try:
     result = train(task, **args, **config)
   except ValueError as e:

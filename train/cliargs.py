@@ -40,3 +40,12 @@ class Parser(argparse.ArgumentParser):
   def error(self, message: str):
     print(f"{self.prog}: error: {' '.join(str(message).split())}", file=sys.stderr)
     sys.exit(2)
+
+
+def say_compiling(seconds: dict, platform: str, what: str = "the first time", default: int = 60) -> None:
+  """Print the line every command prints before its first compile.
+
+  ``seconds``: rough first-compile time of the command's program per platform
+  ("cpu", "gpu"), s — an estimate shown to the user, not a measurement.
+  """
+  print(f"compiling, about {seconds.get(platform, default)} s {what} (seconds once cached) ...", flush=True)
