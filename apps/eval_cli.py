@@ -61,13 +61,16 @@ def main(argv=None) -> int:
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
+  program = R.program_description("eval", args.task, args.policy)
   res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
-                   episode_length=episode_length,
-                   safe_threshold=args.safe_threshold)
+                   episode_length=episode_length, safe_threshold=args.safe_threshold,
+                   program=program, program_roots=R.PROGRAM_ROOTS)
   wall = time.perf_counter() - t0
   title = (f"{args.task} / {args.policy}: {args.episodes} episodes x {res['episode_length']} steps, "
            f"fragility {args.fragility:g}, seed {args.seed}, {res['devices']} device(s), {wall:.1f} s incl. compile")
   print(E.format_table(res["metrics"], title))
+  if res["program"] == "loaded":
+    print("traced program loaded from the cache (no tracing, no compiling)")
   result = {
       "task": args.task, "policy": args.policy, "episodes": args.episodes, "seed": args.seed,
       "fragility": args.fragility, "episode_length": res["episode_length"],

@@ -14,6 +14,8 @@ from __future__ import annotations
 import os
 from typing import Optional
 
+import apps
+import mjx_damage
 import tasks
 import train
 from mjx_damage.wrapper import DamageWrapper
@@ -87,6 +89,25 @@ def make_policy(spec: str, env) -> E.Policy:
   if kind == "scripted":
     return tasks.scripted_policy(env, arg)
   return train.load_policy(arg, env)
+
+
+# Source trees every program a command traces is built from (the program cache's key hashes them).
+PROGRAM_ROOTS = tuple(os.path.dirname(os.path.abspath(m.__file__)) for m in (mjx_damage, tasks, train, apps))
+
+
+def program_description(command: str, task: str, policy_spec: str, **fields) -> dict:
+  """What a command's traced program is built from, for :mod:`mjx_damage.program_cache`.
+
+  Names, overrides and ``fields`` (episode length, batch …) plus, for a
+  ``checkpoint:`` policy, the checkpoint's metadata (its network config fixes the
+  policy's code; the weights are arguments of the program, not part of it).
+  """
+  desc = {"command": command, "task": task, "policy": policy_spec, **fields}
+  kind, arg = parse_policy_spec(policy_spec)
+  if kind == "checkpoint":
+    file = os.path.join(arg, ckpt.FILENAME) if os.path.isdir(arg) else arg
+    desc["checkpoint"] = ckpt.read_meta(file)
+  return desc
 
 
 def add_task_policy_arguments(ap) -> None:

@@ -99,7 +99,9 @@ def main(argv=None) -> int:
 
   res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
                 on_progress=lambda r: write(r, False), make_env=R.make_task, make_policy=R.make_policy,
-                episode_length_of=R.episode_length_of)
+                episode_length_of=R.episode_length_of,
+                describe_program=lambda task, spec: R.program_description("sweep", task, spec),
+                program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")
   return 0

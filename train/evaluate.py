@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from mjx_damage import program_cache
 from mjx_damage.randomize import check_fragility
 
 Policy = Callable  # policy(state, rng) -> action f32[action_size], one env, jittable
@@ -151,9 +152,17 @@ class Evaluator:
   run as ``apply`` with its weights passed in (``run(..., params=)`` swaps
   them); any other ``policy(state, rng)`` is closed over. ``devices``
   (default: all local devices) shard the episode axis.
+
+  ``program``: a JSON-able description that names *everything* the rolled-out
+  function depends on (task and its overrides, policy spec, checkpoint config …;
+  the CLI builds it from names). With it, the traced program is kept on disk by
+  :mod:`mjx_damage.program_cache` (keyed also by the sources under
+  ``program_roots``), so the next process skips tracing. Without it (the Python
+  API, arbitrary closures) the program is traced in every process.
   """
 
-  def __init__(self, env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None):
+  def __init__(self, env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None,
+               program: Optional[dict] = None, program_roots: Sequence[str] = ()):
     if isinstance(episode_length, bool) or not isinstance(episode_length, int) or episode_length < 1:
       raise ValueError(f"episode_length: must be an int >= 1, got {episode_length!r}")
     self.env, self.policy, self.episode_length = env, policy, episode_length
@@ -173,11 +182,25 @@ class Evaluator:
     batched = jax.vmap(one, in_axes=(None, 0, 0))
     self._fn = jax.jit(batched, in_shardings=(self.replicated, self.sharding, self.sharding),
                        out_shardings=self.sharding)
+    self.program = None if program is None else dict(program, episode_length=episode_length,
+                                                         devices=len(self.devices))
+    self.program_roots = tuple(program_roots)
+    self._programs = {}  # argument shapes -> the cached program's callable
+    self.program_source = None  # after run(): "loaded" / "exported" / "off" (None: no program cache asked)
 
   @property
   def num_compiled(self) -> int:
     """Executables compiled so far (one per distinct padded batch size)."""
-    return self._fn._cache_size()
+    return self._fn._cache_size() + sum(f._cache_size() for f in self._programs.values())
+
+  def _callable(self, args):
+    if self.program is None:
+      return self._fn
+    shapes = str(jax.tree.map(lambda x: (jnp.shape(x), str(jnp.result_type(x))), args))
+    if shapes not in self._programs:
+      self._programs[shapes], self.program_source = program_cache.load_or_export(
+          self._fn, args, self.program, self.program_roots)
+    return self._programs[shapes]
 
   def run(self, keys, fragility, params=None) -> dict:
     """Per-episode summaries (numpy, leading axis = episodes) for keys u32[E, 2] and fragility f32[E].
@@ -201,7 +224,8 @@ class Evaluator:
     keys = jax.device_put(keys, self.sharding)
     fragility = jax.device_put(np.ascontiguousarray(fragility), self.sharding)
     params = jax.device_put(params, self.replicated)
-    out = jax.block_until_ready(self._fn(params, keys, fragility))
+    args = (params, keys, fragility)
+    out = jax.block_until_ready(self._callable(args)(*args))
     return jax.tree.map(lambda x: np.asarray(x)[:e], out)
 
 
@@ -281,7 +305,8 @@ def check_args(episodes, fragility, safe_threshold, percentiles=DEFAULT_PERCENTI
 
 def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0,
              episode_length: Optional[int] = None, safe_threshold: float = 95.0,
-             percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None) -> dict:
+             percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None,
+             program: Optional[dict] = None, program_roots: Sequence[str] = ()) -> dict:
   """Evaluate ``policy`` on ``env`` for ``episodes`` episodes in one compiled call.
 
   Args:
@@ -292,13 +317,14 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
     episode_length: env steps per episode (default: the env's ``episode_length``).
     safe_threshold: final entity health above which a completed episode is safe.
     devices: devices to shard the episodes over (default all local devices).
+    program, program_roots: keep the traced program on disk (:class:`Evaluator`).
 
   Returns:
     {"metrics": :func:`metrics`, "per_episode": numpy arrays, "compile_s", "run_s"}.
   """
   check_args(episodes, fragility, safe_threshold, percentiles, seed)
   T = episode_length if episode_length is not None else env_episode_length(env)
-  ev = Evaluator(env, policy, T, devices)
+  ev = Evaluator(env, policy, T, devices, program, program_roots)
   t0 = time.perf_counter()
   per_ep = ev.run(episode_keys(seed, episodes), fragility)
   run_s = time.perf_counter() - t0
@@ -308,6 +334,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
       "episode_length": T,
       "devices": len(ev.devices),
       "seconds": run_s,
+      "program": ev.program_source,
   }
 
 

@@ -51,7 +51,8 @@ def check_sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[i
 def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], fragility: Sequence[float],
           episodes: int, safe_threshold: float = 95.0, episode_length: Optional[int] = None,
           devices=None, log=print, on_progress=None, *, make_env: Callable, make_policy: Callable,
-          episode_length_of: Callable = lambda env, task: E.env_episode_length(env)) -> dict:
+          episode_length_of: Callable = lambda env, task: E.env_episode_length(env),
+          describe_program: Optional[Callable] = None, program_roots: Sequence[str] = ()) -> dict:
   """Run the sweep; returns {"rows": aggregated rows, "runs": per-seed rows, "compiles": {...}}.
 
   ``make_env(task) -> env`` and ``make_policy(spec, env) -> policy(state, rng)``
@@ -59,7 +60,9 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
   task)`` gives a task's episode length when ``episode_length`` is None.
 
   ``on_progress(partial_result)`` is called after every (task, policy), so a
-  long sweep that is interrupted keeps what it finished.
+  long sweep that is interrupted keeps what it finished. ``describe_program(task,
+  spec) -> dict`` (names → a description, as the CLI has) keeps each traced
+  evaluation program on disk (:class:`train.evaluate.Evaluator` ``program``).
   """
   check_sweep(tasks, policies, seeds, fragility, episodes, safe_threshold)
   levels = np.asarray(fragility, np.float32)
@@ -69,7 +72,8 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
     env = make_env(task)
     T = episode_length or episode_length_of(env, task)
     for spec in policies:
-      ev = E.Evaluator(env, make_policy(spec, env), T, devices)
+      program = None if describe_program is None else describe_program(task, spec)
+      ev = E.Evaluator(env, make_policy(spec, env), T, devices, program, program_roots)
       t0 = time.perf_counter()
       per_level = {float(f): [] for f in levels}
       for seed in seeds:
