@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from train.cliargs import Parser, say_compiling
+from train.cliargs import Parser, heartbeat, say_compiling
 
 
 def main(argv=None) -> int:
@@ -45,7 +45,8 @@ def main(argv=None) -> int:
         f"{jax.device_count()}; writes no file", flush=True)
   say_compiling({"cpu": 20, "gpu": 20}, jax.default_backend())
   t0 = time.perf_counter()
-  compiled = rollout.lower(jax.random.PRNGKey(args.seed)).compile()
+  with heartbeat("demo"):
+    compiled = rollout.lower(jax.random.PRNGKey(args.seed)).compile()
   t1 = time.perf_counter()
   height, health, damaged = jax.block_until_ready(compiled(jax.random.PRNGKey(args.seed)))
   t2 = time.perf_counter()

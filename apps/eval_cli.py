@@ -17,7 +17,7 @@ from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json
 from train import evaluate as E
-from train.cliargs import Parser, say_compiling
+from train.cliargs import Parser, heartbeat, say_compiling
 
 # Rough first-compile times of a task's evaluation (s; the persistent cache makes later runs start in seconds).
 COMPILE_S = {"cpu": 40, "gpu": 60}
@@ -62,9 +62,10 @@ def main(argv=None) -> int:
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
   program = R.program_description("eval", args.task, args.policy)
-  res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
-                   episode_length=episode_length, safe_threshold=args.safe_threshold,
-                   program=program, program_roots=R.PROGRAM_ROOTS)
+  with heartbeat("eval"):
+    res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
+                     episode_length=episode_length, safe_threshold=args.safe_threshold,
+                     program=program, program_roots=R.PROGRAM_ROOTS)
   wall = time.perf_counter() - t0
   title = (f"{args.task} / {args.policy}: {args.episodes} episodes x {res['episode_length']} steps, "
            f"fragility {args.fragility:g}, seed {args.seed}, {res['devices']} device(s), {wall:.1f} s incl. compile")

@@ -19,7 +19,7 @@ import time
 from apps import resolve as R
 from mjx_damage import outputs
 from tasks import operators
-from train.cliargs import Parser, say_compiling
+from train.cliargs import Parser, heartbeat, say_compiling
 from train.record import DEFAULT_CHUNK
 
 COMPILE_S = {"cpu": 30, "gpu": 60}  # rough first compile of one task's recording program, s
@@ -86,9 +86,10 @@ def main(argv=None) -> int:
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
-  ds = record(env, policy, args.episodes, args.seed, task=args.task,
-              episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
-              label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))
+  with heartbeat("record"):
+    ds = record(env, policy, args.episodes, args.seed, task=args.task,
+                episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
+                label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))
   rec_s = time.perf_counter() - t0
   D.save(out, ds, overwrite=args.overwrite)
   total_s = time.perf_counter() - t0

@@ -18,7 +18,7 @@ from mjx_damage import outputs, plots, video
 from mjx_damage.gl import ensure_gl
 from mjx_damage.render import camera_of, env_path, render_rollout
 from mjx_damage.trajectory import mj_model_of, positive_int
-from train.cliargs import Parser, say_compiling
+from train.cliargs import Parser, heartbeat, say_compiling
 
 COMPILE_S = {"cpu": 60, "gpu": 60}  # rough first compile of a task's rollout + render set-up, s
 
@@ -89,8 +89,9 @@ def main(argv=None) -> int:
         f"{args.width}x{args.height}, seed {args.seed}, device {platform}; output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
-  res = render_rollout(env, policy, steps=steps, seed=args.seed, out=out, width=args.width,
-                       height=args.height, camera=args.camera, fps=args.fps, num_envs=args.num_envs)
+  with heartbeat("render"):
+    res = render_rollout(env, policy, steps=steps, seed=args.seed, out=out, width=args.width,
+                         height=args.height, camera=args.camera, fps=args.fps, num_envs=args.num_envs)
   traj = res.trajectory
   final = traj.entity_health[-1]
   for b, path in enumerate(res.paths):

@@ -16,7 +16,7 @@ from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json, write_text
 from train import sweep as S
-from train.cliargs import Parser, say_compiling
+from train.cliargs import Parser, heartbeat, say_compiling
 
 COMPILE_S = {"cpu": 40, "gpu": 60}  # rough first compile of one task's evaluation, s
 
@@ -97,11 +97,12 @@ def main(argv=None) -> int:
     write_text(md_path, head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
     return md
 
-  res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
-                on_progress=lambda r: write(r, False), make_env=R.make_task, make_policy=R.make_policy,
-                episode_length_of=R.episode_length_of,
-                describe_program=lambda task, spec: R.program_description("sweep", task, spec),
-                program_roots=R.PROGRAM_ROOTS)
+  with heartbeat("sweep"):
+    res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
+                  on_progress=lambda r: write(r, False), make_env=R.make_task, make_policy=R.make_policy,
+                  episode_length_of=R.episode_length_of,
+                  describe_program=lambda task, spec: R.program_description("sweep", task, spec),
+                  program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")
   return 0

@@ -131,10 +131,12 @@ def load_or_export(fn: Callable, args, description: dict, roots: Sequence[str]) 
     except Exception as e:  # a truncated or foreign file must not stop the command: trace again
       warnings.warn(f"program cache: ignoring unreadable {path} ({type(e).__name__}: {e})",
                     RuntimeWarning, stacklevel=2)
-  exported = export.export(fn)(*jax.tree.map(_shape_struct, args))
+  blob = export.export(fn)(*jax.tree.map(_shape_struct, args)).serialize()
   try:
     os.makedirs(where, exist_ok=True)
-    write_bytes(path, exported.serialize())
+    write_bytes(path, blob)
   except OSError as e:  # read-only cache: run without storing
     warnings.warn(f"program cache: cannot write {path}: {e}", RuntimeWarning, stacklevel=2)
-  return jax.jit(exported.call), "exported"
+  # Run what later processes will load (the round trip), so this process's compilation is the one
+  # the compilation cache answers for them.
+  return jax.jit(export.deserialize(bytearray(blob)).call), "exported"

@@ -28,7 +28,7 @@ import sys
 
 from mjx_damage import outputs
 from train import checkpoint as ckpt
-from train.cliargs import Parser, say_compiling
+from train.cliargs import Parser, heartbeat, say_compiling
 from train.config import MULTIPLIERS, PRESETS, PPOConfig
 
 # No accelerator and no size flag: a run sized to show learning curves on a laptop CPU, not to solve the task.
@@ -247,7 +247,8 @@ def main(argv=None) -> int:
         f"run directory {args['out_dir']}{' (resuming)' if args['resume'] else ''}", flush=True)
   say_compiling(COMPILE_S, platform, default=90)
   try:
-    result = train(task, **args, **config)
+    with heartbeat("train", every=30.0):
+      result = train(task, **args, **config)
   except ValueError as e:
     print(f"mjx-damage train: error: {' '.join(str(e).split())}", file=sys.stderr)
     return 2

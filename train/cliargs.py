@@ -9,7 +9,10 @@ the exit status 2 a shell script can test. ``--help`` shows every default
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+import threading
+import time
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -49,3 +52,28 @@ def say_compiling(seconds: dict, platform: str, what: str = "the first time", de
   ("cpu", "gpu"), s — an estimate shown to the user, not a measurement.
   """
   print(f"compiling, about {seconds.get(platform, default)} s {what} (seconds once cached) ...", flush=True)
+
+
+@contextlib.contextmanager
+def heartbeat(label: str, every: float = 20.0, stream=None):
+  """While the block runs, print ``"<label>: still working, N s so far"`` every ``every`` seconds.
+
+  A compiled call (compilation, or one long batched rollout) gives Python no
+  place to report progress from; a line at a steady rhythm tells the user the
+  command is alive and how long it has taken. The printing thread is a daemon
+  and stops when the block ends (normally, by an error or by Ctrl-C).
+  """
+  stream = sys.stdout if stream is None else stream
+  stop = threading.Event()
+  t0 = time.perf_counter()
+
+  def beat():
+    while not stop.wait(every):
+      print(f"{label}: still working, {time.perf_counter() - t0:.0f} s so far", file=stream, flush=True)
+
+  thread = threading.Thread(target=beat, name="mjx-damage-heartbeat", daemon=True)
+  thread.start()
+  try:
+    yield
+  finally:
+    stop.set()

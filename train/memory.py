@@ -1,0 +1,109 @@
+"""Will a batch fit? Device memory of an evaluation or a training run, estimated before compiling.
+
+A batch too large for the device used to end in an allocator traceback after
+minutes of compiling (GPU), or in swapping and silence (CPU). Here the peak is
+estimated from sizes known before anything compiles and a batch that cannot fit
+is refused with one line naming the flag and the largest value that fits.
+
+Model (bytes; ``state`` = one env's Brax ``State`` — ``mjx.Data`` with its
+contacts and constraint rows, damage state, observation — from
+``jax.eval_shape(env.reset)``, i.e. tracing only)::
+
+    evaluation:  episodes × state × K_EVAL
+    training:    seeds × (num_envs × state × K_TRAIN_STATE
+                          + sequences × unroll_length × transition × K_TRAIN_DATA)
+    transition = 4 bytes × (2·obs + 2·action + 8)   (obs, next obs, action, raw action, scalars)
+
+The factors cover what XLA keeps alive besides the state itself (the scan
+carry's copies, the Newton solver's and collision's temporaries, the shuffled
+minibatch copies). They were measured with XLA's own ``memory_analysis()`` of
+the compiled programs (``benchmarks/memory_estimate.py``, results in
+``benchmarks/results/memory_estimate_cpu.md``: the largest per-env ratio over the
+measured tasks, rounded up), so the estimate is an upper bound for those
+programs; it is still an estimate, and :data:`HEADROOM` of the free memory is
+kept for XLA's own buffers and fragmentation.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Optional
+
+import jax
+import numpy as np
+
+K_EVAL = 6.0
+K_TRAIN_STATE = 8.0
+K_TRAIN_DATA = 4.0
+HEADROOM = 0.85  # fraction of the free memory a batch may plan to use
+
+
+def tree_bytes(tree) -> int:
+  """Total bytes of the array leaves (or ShapeDtypeStructs) of ``tree``."""
+  return int(sum(np.prod(x.shape, dtype=np.int64) * np.dtype(x.dtype).itemsize for x in jax.tree.leaves(tree)))
+
+
+def state_bytes(env) -> int:
+  """Bytes of one env's ``State`` (``env.reset`` traced, not compiled)."""
+  return tree_bytes(jax.eval_shape(env.reset, jax.random.PRNGKey(0)))
+
+
+def transition_bytes(obs_size: int, action_size: int) -> int:
+  """Bytes of one stored training transition (observation, next observation, actions, scalars)."""
+  return 4 * (2 * int(obs_size) + 2 * int(action_size) + 8)
+
+
+def eval_bytes(state: int, episodes: int) -> int:
+  """Estimated peak bytes of evaluating ``episodes`` episodes at once (one env state ``state`` bytes)."""
+  return int(episodes * state * K_EVAL)
+
+
+def train_bytes(state: int, obs_size: int, action_size: int, num_envs: int, sequences: int,
+                unroll_length: int, seeds: int = 1) -> int:
+  """Estimated peak bytes of one training iteration of ``seeds`` seeds (module docstring)."""
+  per_seed = (num_envs * state * K_TRAIN_STATE
+              + sequences * unroll_length * transition_bytes(obs_size, action_size) * K_TRAIN_DATA)
+  return int(seeds * per_seed)
+
+
+def available_bytes(device=None) -> Optional[int]:
+  """Free memory of ``device`` (default: JAX's first): the allocator's limit minus what is in use on
+  an accelerator, ``MemAvailable`` on the CPU; None when the platform does not say."""
+  device = jax.devices()[0] if device is None else device
+  if device.platform != "cpu":
+    stats = device.memory_stats() or {}
+    if "bytes_limit" not in stats:
+      return None
+    return int(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
+  try:
+    with open("/proc/meminfo") as f:
+      for line in f:
+        if line.startswith("MemAvailable:"):
+          return int(line.split()[1]) * 1024
+  except OSError:
+    pass
+  try:
+    return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+  except (ValueError, OSError, AttributeError):
+    return None
+
+
+def _gib(n: float) -> str:
+  return f"{n / 2**30:.1f} GiB"
+
+
+def check_fits(field: str, value: int, needed: int, per_unit: float, available: Optional[int],
+               what: str = "this batch") -> None:
+  """Raise ``ValueError("<field>: ...")`` when ``needed`` bytes exceed the usable free memory.
+
+  ``per_unit``: estimated bytes per unit of ``value`` (to say the largest value that fits).
+  ``available`` None (unknown) accepts everything.
+  """
+  if available is None:
+    return
+  usable = HEADROOM * available
+  if needed <= usable:
+    return
+  largest = int(usable // per_unit) if per_unit > 0 else 0
+  raise ValueError(f"{field}: {value} needs about {_gib(needed)} of device memory for {what}, "
+                   f"{_gib(available)} is free; the largest that fits is about {largest}")
