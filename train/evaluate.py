@@ -42,6 +42,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from mjx_damage import program_cache
 from mjx_damage.randomize import check_fragility
+from train import memory as MEM
 
 Policy = Callable  # policy(state, rng) -> action f32[action_size], one env, jittable
 
@@ -303,6 +304,19 @@ def check_args(episodes, fragility, safe_threshold, percentiles=DEFAULT_PERCENTI
       raise ValueError(f"percentiles: each must be in [0, 100], got {p!r}")
 
 
+def check_memory(env, episodes: int, devices: Optional[Sequence] = None, per_episode_batch: int = 1,
+                 available=None) -> None:
+  """Refuse (``ValueError`` naming ``episodes``) an evaluation whose estimated memory per device does not
+  fit (:mod:`train.memory`; ``env.reset`` is traced, nothing compiles). ``per_episode_batch``: envs
+  per requested episode (a sweep runs every episode at each fragility level)."""
+  n_dev = len(devices) if devices is not None else jax.local_device_count()
+  per_device = -(-episodes * per_episode_batch // n_dev)
+  needed = MEM.eval_bytes(MEM.state_bytes(env), per_device)
+  MEM.check_fits("episodes", episodes, needed, needed / episodes,
+                 MEM.available_bytes() if available is None else available,
+                 f"{per_device} env(s) per device")
+
+
 def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0,
              episode_length: Optional[int] = None, safe_threshold: float = 95.0,
              percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None,
@@ -324,6 +338,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
   """
   check_args(episodes, fragility, safe_threshold, percentiles, seed)
   T = episode_length if episode_length is not None else env_episode_length(env)
+  check_memory(env, episodes, devices)
   ev = Evaluator(env, policy, T, devices, program, program_roots)
   t0 = time.perf_counter()
   per_ep = ev.run(episode_keys(seed, episodes), fragility)

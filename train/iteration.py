@@ -48,6 +48,7 @@ from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 
 from train import evaluate as E
+from train import memory as MEM
 from train import multipliers as M
 from train import networks as N
 from train.config import PPOConfig
@@ -102,7 +103,9 @@ class Trainer:
     episodic = brax_training.EpisodeWrapper(env, cfg.episode_length, action_repeat=1)
     # Training: auto-resetting batch (brax's order: Episode → Vmap → AutoReset).
     self.env = brax_training.AutoResetWrapper(brax_training.VmapWrapper(episodic))
-    obs_shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape
+    state_shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
+    self.env_state_bytes = MEM.tree_bytes(state_shape)  # one env's State, for the memory estimate
+    obs_shape = state_shape.obs.shape
     if len(obs_shape) != 1:
       raise ValueError(f"task: observations must be flat vectors, got shape {obs_shape}")
     self.obs_size, self.action_size = int(obs_shape[0]), int(env.action_size)

@@ -36,6 +36,7 @@ import numpy as np
 
 from mjx_damage import io
 from train import checkpoint as ckpt
+from train import memory as MEM
 from train.config import RESUMABLE_CHANGES, PPOConfig
 from train.envs import resolve_task, safe_threshold_of, task_episode_length  # noqa: F401  (public here too)
 from train.iteration import Trainer, TrainState, shape_reward  # noqa: F401
@@ -108,6 +109,17 @@ class _StopFlag:
       signal.signal(s, h)
 
 
+def check_memory(trainer: Trainer, cfg: PPOConfig, available=None) -> None:
+  """Refuse (``ValueError`` naming ``num_envs``) a run whose estimated peak memory does not fit the device
+  (:mod:`train.memory`); checked before anything compiles."""
+  sequences = cfg.minibatch_sequences * cfg.num_minibatches
+  needed = (MEM.train_bytes(trainer.env_state_bytes, trainer.obs_size, trainer.action_size, cfg.num_envs,
+                            sequences, cfg.unroll_length, cfg.num_seeds)
+            + MEM.eval_bytes(trainer.env_state_bytes, cfg.num_eval_envs))
+  MEM.check_fits("num_envs", cfg.num_envs, needed, needed / cfg.num_envs,
+                 MEM.available_bytes() if available is None else available,
+                 f"{cfg.num_seeds} seed(s) of training")
+
 def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] = None,
           episode_length: Optional[int] = None, out_dir: Optional[str] = None, resume: bool = False,
           progress: bool = True, time_limit: Optional[float] = None, task_kwargs: Optional[dict] = None,
@@ -148,6 +160,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   if episode_length is None:
     cfg = dataclasses.replace(cfg, episode_length=task_episode_length(env))
   trainer = Trainer(env, cfg)
+  check_memory(trainer, cfg)
   S, spi = cfg.num_seeds, cfg.steps_per_iteration
   seed_arr = jnp.asarray(cfg.seeds, jnp.int32)
 

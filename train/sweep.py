@@ -68,8 +68,11 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
   levels = np.asarray(fragility, np.float32)
   frag = np.repeat(levels, episodes)  # [levels × episodes]
   runs, rows, compiles = [], [], {}
+  envs = {task: make_env(task) for task in tasks}
+  for env in envs.values():  # every batch checked before the first compiles
+    E.check_memory(env, episodes, devices, per_episode_batch=len(levels))
   for task in tasks:
-    env = make_env(task)
+    env = envs[task]
     T = episode_length or episode_length_of(env, task)
     for spec in policies:
       program = None if describe_program is None else describe_program(task, spec)
