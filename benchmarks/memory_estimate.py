@@ -67,7 +67,7 @@ def train_program_bytes(env, n: int) -> tuple[int, PPOConfig, Trainer]:
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
   ap.add_argument("--tasks", default="place_plate,pour_water,shelve_item")
-  ap.add_argument("--sizes", default="8,64", help="two batch sizes (envs / episodes), multiples of 4")
+  ap.add_argument("--sizes", default="8,32", help="two batch sizes (envs / episodes), multiples of 4")
   ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   args = ap.parse_args(argv)
   lo, hi = (int(s) for s in args.sizes.split(","))

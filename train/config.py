@@ -94,6 +94,9 @@ class PPOConfig:
   num_eval_envs: int = 128
   eval_every: int = 0  # env steps between evaluations; 0 → only at the end
   checkpoint_every: int = 0  # env steps between checkpoints; 0 → only at the end
+  # First iterations in which only the critic learns (the actor is held): for a run started from a
+  # pre-trained actor (train(init_from=...)), whose fresh critic would otherwise steer it with noise.
+  critic_warmup_iterations: int = 0
   seeds: tuple[int, ...] = (0,)
 
   @classmethod
@@ -173,7 +176,7 @@ class PPOConfig:
     if (self.minibatch_sequences * self.num_minibatches) % self.num_envs:
       raise ValueError(f"num_envs: {self.num_envs} must divide batch_size·num_minibatches = "
                        f"{self.minibatch_sequences}·{self.num_minibatches}")
-    for name in ("eval_every", "checkpoint_every"):
+    for name in ("eval_every", "checkpoint_every", "critic_warmup_iterations"):
       v = getattr(self, name)
       if not is_int(v) or v < 0:
         raise ValueError(f"{name}: must be an integer >= 0, got {v!r}")

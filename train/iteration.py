@@ -221,7 +221,18 @@ class Trainer:
         jax.random.split(k_sgd, self.cfg.num_updates_per_batch))
     metrics = {k: jnp.sum(v * taken) / jnp.maximum(jnp.sum(taken), 1.0) for k, v in metrics.items()}
     metrics["sgd_steps"] = jnp.sum(taken)
+    if self.cfg.critic_warmup_iterations:
+      params, opt_state = self._hold_actor(ts, params, opt_state, ts.iteration < self.cfg.critic_warmup_iterations)
     return ts.replace(params=params, opt_state=opt_state, normalizer=normalizer, rng=key), metrics
+
+  @staticmethod
+  def _hold_actor(ts: TrainState, params, opt_state, hold):
+    """While ``hold`` (critic warm-up), the actor's weights and its optimizer state stay as they were."""
+    keep = lambda old, new: jax.tree.map(lambda a, b: jnp.where(hold, a, b), old, new)  # noqa: E731
+    inner = dict(opt_state.inner_states)
+    inner["policy"] = keep(ts.opt_state.inner_states["policy"], inner["policy"])
+    return (params.replace(policy=keep(ts.params.policy, params.policy)),
+            opt_state._replace(inner_states=inner))
 
   def train_iteration(self, ts: TrainState):
     """``(TrainState) -> (TrainState, metrics: dict of f32[])`` for one seed."""

@@ -32,8 +32,8 @@ from typing import Optional
 import jax
 import numpy as np
 
-K_EVAL = 6.0
-K_TRAIN_STATE = 8.0
+K_EVAL = 3.0
+K_TRAIN_STATE = 6.0
 K_TRAIN_DATA = 4.0
 HEADROOM = 0.85  # fraction of the free memory a batch may plan to use
 

@@ -120,10 +120,53 @@ def check_memory(trainer: Trainer, cfg: PPOConfig, available=None) -> None:
                  MEM.available_bytes() if available is None else available,
                  f"{cfg.num_seeds} seed(s) of training")
 
+ACTOR_FIELDS = ("policy_hidden_sizes", "activation", "normalize_observations")  # what fixes the actor's shape
+
+
+def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str) -> str:
+  """The checkpoint file behind ``init_from``, checked against this run (``ValueError("init_from: …")``)."""
+  path = os.fspath(path)
+  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+  if not os.path.isfile(file):
+    raise ValueError(f"init_from: no checkpoint at {file}")
+  try:
+    meta = ckpt.read_meta(file)
+    src = PPOConfig.from_json(meta["config"])
+  except (ValueError, KeyError, TypeError) as e:
+    raise ValueError(f"init_from: {file} is not a readable checkpoint ({e})") from None
+  if meta.get("task") not in (None, task_name):
+    raise ValueError(f"init_from: {file} was made for task {meta['task']!r}, this run trains {task_name!r}")
+  sizes = (int(meta.get("obs_size", -1)), int(meta.get("action_size", -1)))
+  if sizes != (trainer.obs_size, trainer.action_size):
+    raise ValueError(f"init_from: {file} has observation/action sizes {sizes}, this task "
+                     f"{(trainer.obs_size, trainer.action_size)}")
+  for f in ACTOR_FIELDS:
+    if getattr(src, f) != getattr(cfg, f):
+      raise ValueError(f"init_from: {file} has {f} = {getattr(src, f)!r}, this run {getattr(cfg, f)!r} "
+                       f"(give --{f.replace('_', '-')} or a matching preset)")
+  if src.num_seeds not in (1, cfg.num_seeds):
+    raise ValueError(f"init_from: {file} holds {src.num_seeds} seeds; this run has {cfg.num_seeds} "
+                     "(give a checkpoint of 1 seed, or of as many seeds as the run)")
+  return file
+
+
+def actor_from_checkpoint(file: str, trainer: Trainer, ts: TrainState) -> TrainState:
+  """``ts`` (leading seed axis S) with the actor and normaliser of checkpoint ``file``, a fresh optimizer."""
+  S = int(ts.iteration.shape[0])
+  src_seeds = len(PPOConfig.from_json(ckpt.read_meta(file)["config"]).seeds)
+  one = jax.eval_shape(lambda: trainer.inference_params(jax.tree.map(lambda x: x[0], ts)))
+  template = jax.tree.map(lambda t: jax.ShapeDtypeStruct((src_seeds,) + tuple(t.shape), t.dtype), one)
+  normalizer, policy = ckpt.restore(file, template, "policy")
+  if src_seeds != S:  # one pre-trained actor for every seed
+    normalizer, policy = jax.tree.map(lambda x: jnp.broadcast_to(x, (S,) + x.shape[1:]), (normalizer, policy))
+  params = ts.params.replace(policy=jax.tree.map(jnp.asarray, policy))
+  return ts.replace(params=params, normalizer=jax.tree.map(jnp.asarray, normalizer),
+                    opt_state=jax.vmap(trainer.optimizer.init)(params))
+
 def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] = None,
           episode_length: Optional[int] = None, out_dir: Optional[str] = None, resume: bool = False,
           progress: bool = True, time_limit: Optional[float] = None, task_kwargs: Optional[dict] = None,
-          profile: bool = False, plot: bool = True, **config) -> TrainResult:
+          profile: bool = False, plot: bool = True, init_from: Optional[str] = None, **config) -> TrainResult:
   """Train PPO / PPO-Lagrangian / PID-Lagrangian on ``task`` for one or several seeds in one program.
 
   Args:
@@ -138,6 +181,9 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       checkpoint_every, num_eval_envs may change). Equals an uninterrupted run.
     time_limit: stop after the iteration that crosses this many seconds (then evaluate, checkpoint, return).
     profile: time rollout-only vs whole iterations at the end (one extra compile).
+    init_from: a checkpoint (run directory or file: a PPO run, or a BC actor from :mod:`train.bc_actor`)
+      whose actor and observation normaliser start every seed (one seed broadcast, or one per seed);
+      the critic starts fresh — ``critic_warmup_iterations`` holds the actor while it learns.
   SIGINT/SIGTERM: the running iteration finishes, a checkpoint is written (with ``out_dir``) and
   ``SystemExit(130)`` is raised.
   """
@@ -160,6 +206,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   if episode_length is None:
     cfg = dataclasses.replace(cfg, episode_length=task_episode_length(env))
   trainer = Trainer(env, cfg)
+  init_file = None if init_from is None else check_init_from(init_from, trainer, cfg, task_name)
   check_memory(trainer, cfg)
   S, spi = cfg.num_seeds, cfg.steps_per_iteration
   seed_arr = jnp.asarray(cfg.seeds, jnp.int32)
@@ -170,7 +217,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     os.makedirs(out_dir, exist_ok=True)
     ckpt_path = os.path.join(out_dir, ckpt.FILENAME)
   meta = {"task": task_name, "task_kwargs": task_kwargs or {}, "preset": preset, "config": cfg.to_json(),
-          "obs_size": trainer.obs_size, "action_size": trainer.action_size, "steps_per_iteration": spi}
+          "obs_size": trainer.obs_size, "action_size": trainer.action_size, "steps_per_iteration": spi,
+          "init_from": None if init_file is None else os.path.abspath(init_file)}
 
   timings = {k: 0.0 for k in ("compile", "eval_compile", "iterations", "eval", "checkpoint", "host")}
   rows: list = []
@@ -190,6 +238,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     if resume:
       print(f"resume: no checkpoint in {out_dir}; starting a fresh run", file=sys.stderr)
     ts = jax.jit(init_fn)(seed_arr)
+    if init_file is not None:
+      ts = actor_from_checkpoint(init_file, trainer, ts)
     start_iteration = 0
   if out_dir is not None:
     io.write_json(os.path.join(out_dir, "config.json"), meta)
