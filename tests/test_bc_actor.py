@@ -122,3 +122,25 @@ def test_saved_file_is_a_checkpoint(fitted):
   _, out = fitted
   meta = ckpt.read_meta(os.path.join(out, ckpt.FILENAME))
   assert meta["kind"] == "bc_actor" and meta["config"]["seeds"] == [0, 1]
+
+
+def test_bc_cli_writes_a_checkpoint_and_refuses_to_overwrite(demos, tmp_path):
+  import subprocess
+  import sys
+  root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+  data = tmp_path / "demos.hdf5"
+  D.save(str(data), demos)
+  cmd = [sys.executable, "-m", "apps.cli", "bc", "--dataset", str(data), "--out", str(tmp_path / "bc"),
+         "--steps", "20", "--batch", "16", "--policy-hidden", "8,8", "--min-health", "95"]
+  env = dict(os.environ, PYTHONPATH=root)
+  p = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+  assert p.returncode == 0, p.stderr[-2000:]
+  meta = ckpt.read_meta(str(tmp_path / "bc" / ckpt.FILENAME))
+  assert meta["kind"] == "bc_actor" and meta["task"] == "pusher" and meta["config"]["policy_hidden_sizes"] == [8, 8]
+  before = (tmp_path / "bc" / ckpt.FILENAME).read_bytes()
+  p = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+  assert p.returncode == 2 and "--out" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+  assert (tmp_path / "bc" / ckpt.FILENAME).read_bytes() == before
+  p = subprocess.run(cmd[:4] + ["--dataset", str(tmp_path / "missing.hdf5")], cwd=tmp_path, env=env,
+                     capture_output=True, text=True, timeout=600)
+  assert p.returncode == 2 and "--dataset" in p.stderr

@@ -106,6 +106,8 @@ CONFIG_FLAGS = (
     ("--eval-every", "eval_every", _int, "env steps between evaluations (0: at the end)"),
     ("--checkpoint-every", "checkpoint_every", _int, "env steps between checkpoints (0: at the end)"),
     ("--eval-envs", "num_eval_envs", _int, "deterministic evaluation episodes per seed"),
+    ("--critic-warmup", "critic_warmup_iterations", _int, "first iterations in which only the critic learns "
+     "(for --init-from)"),
 )
 
 
@@ -135,6 +137,9 @@ def build_parser() -> Parser:
   p.add_argument("--episode-length", type=_int, default=None, help="env steps (default: the task's)")
   p.add_argument("--time-limit", type=float, default=None, help="stop training after this many seconds (default: no limit)")
   p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+  p.add_argument("--init-from", dest="init_from", default=None, metavar="RUN",
+                 help="start every seed's actor and normaliser from this checkpoint (mjx-damage bc, or a train "
+                      "run); the critic starts fresh (default: none)")
   for flag, dest, typ, help_ in CONFIG_FLAGS:
     # default None = the preset's value, spelled out per preset (the formatter would only say None)
     text = ((help_ + " ") if help_ else "") + _preset_defaults(dest)
@@ -210,6 +215,8 @@ def main(argv=None) -> int:
   try:  # everything the user typed is checked here, before JAX starts
     args["task_kwargs"] = _task_kwargs(args.pop("task_arg")) or None
     check_task(task)
+    if args["init_from"] is not None and not os.path.exists(args["init_from"]):
+      raise ValueError(f"--init-from: no checkpoint at {args['init_from']}")
     if args["time_limit"] is not None and not (math.isfinite(args["time_limit"]) and args["time_limit"] > 0):
       raise ValueError(f"--time-limit: must be a number of seconds > 0, got {args['time_limit']}")
     if args["episode_length"] is not None and args["episode_length"] < 1:
