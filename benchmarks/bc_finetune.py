@@ -1,0 +1,162 @@
+"""BC → PPO fine-tuning with the damage penalty (the paper's Move Glass of Water experiment).
+
+One command:
+
+1. record ``--demos`` safe and ``--demos`` unsafe episodes of the task's scripted
+   policies through the compiled batched step (:func:`train.record.record`),
+   keeping the successful ones (a mixed-quality dataset, like the paper's 25 + 25);
+2. behaviour-clone them into the PPO actor, one network per seed in one call
+   (:func:`train.bc_actor.fit_actor`);
+3. evaluate each seed's BC actor (``--eval-episodes`` deterministic episodes);
+4. fine-tune every seed with PPO and the damage penalty from its BC actor
+   (``train(init_from=..., critic_warmup_iterations=..., damage_weight=...)``, all
+   seeds in one program) and evaluate again.
+
+Reports completion and safe completion (DAMAGE_MODEL.md §7) before and after, per
+seed and mean ± std, in ``benchmarks/results/bc_finetune_<task>_<device>[_<tag>].{json,md}``.
+
+GPU (one call, ≤ 10 min; move_glass_of_water once it is registered, else pour_water)::
+
+    python benchmarks/bc_finetune.py --task pour_water --results-dir $OUT
+
+CPU (tiny: checks the pipeline end to end; its numbers are not the experiment)::
+
+    .venv/bin/python benchmarks/bc_finetune.py --quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+  sys.path.insert(0, ROOT)
+
+import mjx_damage  # noqa: E402,F401  (first: XLA flags, compilation cache)
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+import tasks  # noqa: E402
+import train  # noqa: E402
+from mjx_damage import data as D  # noqa: E402
+from mjx_damage.io import write_json, write_text  # noqa: E402
+from mjx_damage.runtime import device_info  # noqa: E402
+from train import bc_actor as BA  # noqa: E402
+from train import curate  # noqa: E402
+from train import evaluate as E  # noqa: E402
+from train.config import PPOConfig  # noqa: E402
+from train.record import record  # noqa: E402
+
+FULL = dict(demos=25, seeds=3, bc_steps=4000, eval_episodes=256, num_envs=2048, timesteps=20_000_000,
+            warmup=10, damage_weight=2.0, chunk=64)
+QUICK = dict(demos=6, seeds=2, bc_steps=300, eval_episodes=16, num_envs=32, timesteps=32 * 10 * 6,
+             warmup=2, damage_weight=2.0, chunk=12)
+
+
+def eval_checkpoint(run_dir: str, env, seeds, episodes: int) -> list[dict]:
+  """Deterministic evaluation of each seed's actor in a checkpoint → train.evaluate's flat summary per seed."""
+  out = []
+  ev = None
+  for s in seeds:
+    policy = train.load_policy(run_dir, env, seed=s)
+    if ev is None:
+      ev = E.Evaluator(env, E.parametrized_policy(policy.apply, None), E.env_episode_length(env))
+    per_ep = ev.run(E.episode_keys(10_000 + s, episodes), 1.0, params=policy.params)
+    out.append(E.scalar_metrics(E.metrics(per_ep, env.entity_names)))
+  return out
+
+
+def stats(rows: list[dict], key: str) -> tuple[float, float]:
+  v = np.array([r[key] for r in rows], np.float64) * 100.0
+  return float(v.mean()), float(v.std())
+
+
+def main(argv=None) -> int:
+  ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+  ap.add_argument("--task", default="move_glass_of_water" if "move_glass_of_water" in tasks.names() else "pour_water")
+  ap.add_argument("--quick", action="store_true", help="tiny CPU run: the pipeline, not the experiment")
+  ap.add_argument("--preset", default="playground")
+  ap.add_argument("--tag", default="")
+  ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  for k, v in FULL.items():
+    ap.add_argument(f"--{k.replace('_', '-')}", type=type(v), default=None, help=f"default {v} (--quick: {QUICK[k]})")
+  args = ap.parse_args(argv)
+  size = dict(QUICK if args.quick else FULL)
+  size.update({k: getattr(args, k) for k in FULL if getattr(args, k) is not None})
+  if args.task not in tasks.names():
+    ap.error(f"--task: unknown task {args.task!r}")
+  seeds = tuple(range(size["seeds"]))
+  slug, desc = device_info()
+  t_start = time.perf_counter()
+  env = tasks.make(args.task)
+  T = E.env_episode_length(env)
+
+  # 1. a mixed dataset: successful safe and unsafe demonstrations
+  parts = {}
+  for i, style in enumerate(("safe", "unsafe")):
+    ds = record(env, tasks.scripted_policy(env, style), size["demos"], seed=100 + i, task=args.task,
+                episode_length=T, chunk=size["chunk"], label=style)
+    parts[style] = curate.successful(ds)
+  data = D.concat([parts["safe"], parts["unsafe"]])
+  kept = {k: int(v.num_episodes) for k, v in parts.items()}
+  print(f"dataset: {kept} successful episodes kept of {size['demos']} each", flush=True)
+
+  with tempfile.TemporaryDirectory(prefix="bc_finetune_") as tmp:
+    # 2. BC into the PPO actor
+    cfg = PPOConfig.preset(args.preset)
+    t0 = time.perf_counter()
+    fit = BA.fit_actor(data, cfg, seeds=seeds, steps=size["bc_steps"], batch=256)
+    bc_dir = os.path.join(tmp, "bc")
+    BA.save(fit, bc_dir, task=args.task)
+    bc_s = time.perf_counter() - t0
+    # 3. BC evaluation
+    before = eval_checkpoint(bc_dir, env, seeds, size["eval_episodes"])
+    print("BC: " + ", ".join(f"seed {s}: C {100 * m['completion']:.0f} % SC {100 * m['safe_completion']:.0f} %"
+                              for s, m in zip(seeds, before)), flush=True)
+    # 4. PPO fine-tuning with the damage penalty, all seeds in one program
+    t0 = time.perf_counter()
+    res = train.train(args.task, preset=args.preset, seeds=seeds, init_from=bc_dir,
+                      critic_warmup_iterations=size["warmup"], damage_weight=size["damage_weight"],
+                      num_envs=size["num_envs"], num_timesteps=size["timesteps"],
+                      num_eval_envs=size["eval_episodes"], progress=False, plot=False,
+                      **({"batch_size": size["num_envs"] // 4, "num_minibatches": 4} if args.quick else {}))
+    ft_s = time.perf_counter() - t0
+    after = res.final_evals
+
+  cmd = "python benchmarks/bc_finetune.py " + " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
+  summary = {k: {"before": stats(before, k), "after": stats(after, k)} for k in ("completion", "safe_completion")}
+  result = {"command": cmd.strip(), "device": desc, "task": args.task, "preset": args.preset, "size": size,
+            "quick": args.quick, "seeds": list(seeds), "dataset_episodes": kept, "bc_seconds": bc_s,
+            "finetune_seconds": ft_s, "wall_seconds": time.perf_counter() - t_start,
+            "env_steps_per_seed": res.env_steps, "before": before, "after": after, "summary": summary}
+  os.makedirs(args.results_dir, exist_ok=True)
+  base = os.path.join(args.results_dir, f"bc_finetune_{args.task}_{slug}" + (f"_{args.tag}" if args.tag else ""))
+  write_json(base + ".json", result)
+  lines = [f"# BC → PPO fine-tuning with the damage penalty: {args.task} ({desc})", "",
+           f"Command: `{result['command']}`", "",
+           f"Dataset: successful scripted demonstrations, {kept['safe']} safe + {kept['unsafe']} unsafe "
+           f"(of {size['demos']} each). BC into the PPO actor ({size['bc_steps']} steps), then PPO from it with "
+           f"damage weight {size['damage_weight']:g}, {size['warmup']} critic warm-up iterations, "
+           f"{size['num_envs']} envs × {res.env_steps:,} env steps per seed ({ft_s:.0f} s for all "
+           f"{len(seeds)} seeds in one program). Evaluation: {size['eval_episodes']} deterministic episodes per seed.",
+           "" if not args.quick else "\n**--quick: a pipeline check at toy size; these numbers are not the experiment.**",
+           "", "| | completion % | safe completion % |", "|---|---|---|"]
+  for when in ("before", "after"):
+    c, sc = summary["completion"][when], summary["safe_completion"][when]
+    lines.append(f"| {'BC' if when == 'before' else 'BC → PPO'} | {c[0]:.1f} ± {c[1]:.1f} | {sc[0]:.1f} ± {sc[1]:.1f} |")
+  lines += ["", "Per seed (C / SC %): " + "; ".join(
+      f"seed {s}: {100 * b['completion']:.0f}/{100 * b['safe_completion']:.0f} → "
+      f"{100 * a['completion']:.0f}/{100 * a['safe_completion']:.0f}" for s, b, a in zip(seeds, before, after))]
+  write_text(base + ".md", "\n".join(lines) + "\n")
+  print("\n".join(lines[-6:]))
+  print(f"wrote {base}.json, {base}.md")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
