@@ -13,9 +13,14 @@ serves both policies) and the time of the compiled run.
 Targets (issue #4): safe policy completion ≥ 95 % and safe completion ≥ 90 %;
 unsafe policy completion ≥ 80 % and safe completion ≤ 10 %.
 
+``--robot`` picks the robot (:func:`tasks.robots.names`; default the gripper);
+``--name`` the results' file stem (default ``scripted_policies`` for the
+gripper, ``scripted_policies_<robot>_<backend>`` otherwise).
+
 Usage::
 
-    .venv/bin/python benchmarks/scripted_policies.py [--episodes 256] [--chunk 64] [--tasks a,b] [--seed 0]
+    .venv/bin/python benchmarks/scripted_policies.py [--episodes 256] [--chunk 64] [--tasks a,b] [--seed 0] \
+        [--robot panda] [--name scripted_policies_panda_cpu]
 """
 
 from __future__ import annotations
@@ -40,6 +45,8 @@ import jax.numpy as jnp  # noqa: E402
 jax.config.update("jax_enable_compilation_cache", False)
 
 import tasks  # noqa: E402
+from mjx_damage.io import write_json, write_text  # noqa: E402
+from tasks import robots  # noqa: E402
 from tasks.rollout import rollout_fn, summarise  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(__file__), "results")
@@ -53,7 +60,7 @@ def meets_target(style: str, row: dict) -> bool:
   return row["completion_pct"] >= 80.0 and row["safe_completion_pct"] <= 10.0
 
 
-def run_task(name: str, episodes: int, seed: int, chunk: int) -> list[dict]:
+def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = robots.DEFAULT) -> list[dict]:
   """Both policies' episodes of one task; ``chunk`` episodes per policy per compiled call.
 
   All calls reuse ONE compiled executable (same shapes). ``chunk = episodes``
@@ -63,7 +70,7 @@ def run_task(name: str, episodes: int, seed: int, chunk: int) -> list[dict]:
   """
   if episodes % chunk:
     raise ValueError(f"chunk: must divide episodes ({episodes}), got {chunk}")
-  env = tasks.make(name)
+  env = tasks.make(name, robot=robot)
   length = env.unwrapped.episode_length
   run = rollout_fn(env, [tasks.scripted_policy(env, s) for s in STYLES], length)
   rngs = jax.random.split(jax.random.PRNGKey(seed), len(STYLES) * episodes).reshape(len(STYLES), episodes, -1)
@@ -85,7 +92,8 @@ def run_task(name: str, episodes: int, seed: int, chunk: int) -> list[dict]:
   rows = []
   for i, style in enumerate(STYLES):
     sub = jax.tree.map(lambda x: x[i * episodes : (i + 1) * episodes], stats)
-    row = {"task": name, "policy": style, "episode_length": length, "entities": list(env.entity_names)}
+    row = {"task": name, "robot": robot, "policy": style, "episode_length": length,
+           "entities": list(env.entity_names)}
     row.update(summarise(sub))
     row["first_compile_s"] = round(t_compile, 1)
     row["run_s"] = round(t_run, 1)
@@ -97,10 +105,10 @@ def run_task(name: str, episodes: int, seed: int, chunk: int) -> list[dict]:
   return rows
 
 
-def write(rows: list[dict], command: str) -> None:
+def write(rows: list[dict], command: str, stem: str = "scripted_policies") -> None:
   """Write the table; rows of tasks not in this run are kept from the existing JSON (each row names its command)."""
   os.makedirs(RESULTS, exist_ok=True)
-  path = os.path.join(RESULTS, "scripted_policies.json")
+  path = os.path.join(RESULTS, stem + ".json")
   done = {r["task"] for r in rows}
   if os.path.exists(path):
     with open(path) as f:
@@ -114,11 +122,12 @@ def write(rows: list[dict], command: str) -> None:
       "cpu_count": os.cpu_count(),
       "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
   }
-  with open(os.path.join(RESULTS, "scripted_policies.json"), "w") as f:
-    json.dump({"meta": meta, "rows": rows}, f, indent=1)
+  write_json(path, {"meta": meta, "rows": rows}, indent=1)
+  robot_names = sorted({r.get("robot", robots.DEFAULT) for r in rows})
   lines = [
       "# Scripted safe vs unsafe policies (DAMAGE_MODEL.md §7 metrics)",
       "",
+      f"Robot: {', '.join(robot_names)}.  ",
       f"Command (latest run; each JSON row records the command that produced it): `{command}`  ",
       f"jax {meta['jax']} on {meta['backend']} ({meta['cpu_count']} CPU cores, shared), {meta['date']}.",
       "Per task: ONE compiled `jit(vmap(scan))` executable runs the episodes of both policies (policy chosen per "
@@ -141,8 +150,7 @@ def write(rows: list[dict], command: str) -> None:
   for r in rows:
     ents = ", ".join(f"{n} {h:.1f}" for n, h in zip(r["entities"], r["entity_health_mean"]))
     lines.append(f"- {r['task']} / {r['policy']}: {ents}")
-  with open(os.path.join(RESULTS, "scripted_policies.md"), "w") as f:
-    f.write("\n".join(lines) + "\n")
+  write_text(os.path.join(RESULTS, stem + ".md"), "\n".join(lines) + "\n")
 
 
 def main(argv=None) -> int:
@@ -151,7 +159,14 @@ def main(argv=None) -> int:
   p.add_argument("--tasks", default=",".join(tasks.names()))
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--chunk", type=int, default=0, help="episodes per policy per compiled call (default: all in one)")
+  p.add_argument("--robot", default=robots.DEFAULT, help=f"one of {', '.join(robots.names())}")
+  p.add_argument("--name", default=None, help="results file stem under benchmarks/results (see the module docstring)")
   a = p.parse_args(argv)
+  robots.robot_class(a.robot)  # ValueError listing the valid robots, before anything compiles
+  stem = a.name or ("scripted_policies" if a.robot == robots.DEFAULT
+                    else f"scripted_policies_{a.robot}_{jax.default_backend()}")
+  if not stem or os.sep in stem or stem.startswith("."):
+    raise ValueError(f"name: must be a plain file stem, got {stem!r}")
   names = [n for n in a.tasks.split(",") if n]
   for n in names:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
@@ -162,8 +177,8 @@ def main(argv=None) -> int:
   COMMAND = command.strip()
   rows = []
   for n in names:
-    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes)
-    write(rows, command.strip())  # partial results survive an interrupted run
+    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes, a.robot)
+    write(rows, command.strip(), stem)  # partial results survive an interrupted run
   return 0
 
 

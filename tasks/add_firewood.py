@@ -81,7 +81,7 @@ class AddFirewood(Task):
     k = jax.random.split(rng, 2)
     log_xy = jax.random.uniform(k[0], (2,), minval=jnp.array([-0.26, -0.1]), maxval=jnp.array([-0.14, 0.1]))
     eef = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.1, -0.05, 0.12]), maxval=jnp.array([0.0, 0.05, 0.18]))
-    qpos = R.Robot.home(qpos, eef)
+    qpos = self.robot.home(qpos, eef)
     qpos = qpos.at[self._lq : self._lq + 7].set(jnp.concatenate([log_xy, jnp.array([LOG_REST_Z, 1.0, 0, 0, 0])]))
     return qpos, {}
 
@@ -93,9 +93,9 @@ class AddFirewood(Task):
     target = jnp.array([FIRE_XY[0], FIRE_XY[1], GRATE_TOP + LOG_REST_Z])
     on_grate = (jnp.abs(p[0] - FIRE_XY[0]) < 0.1) & (jnp.abs(p[1] - FIRE_XY[1]) < 0.07) & (p[2] < 0.06)
     slow = jnp.linalg.norm(d.qvel[self._lv : self._lv + 3]) < 0.1
-    success = on_grate & slow & (R.Robot.gap(d) > 0.07)
+    success = on_grate & slow & (self.robot.gap(d) > 0.07)
     dist = jnp.linalg.norm(p - target)
-    reward = -2.0 * dist - 0.5 * jnp.linalg.norm(R.Robot.eef_pos(d) - p)
+    reward = -2.0 * dist - 0.5 * jnp.linalg.norm(self.robot.eef_pos(d) - p)
     return reward, success, {"log_fire_distance": dist}
 
   def policy(self, style):
@@ -114,9 +114,9 @@ class AddFirewood(Task):
 
     def act(state, rng):
       d = state.pipeline_state
-      e = R.Robot.eef_pos(d)
+      e = self.robot.eef_pos(d)
       p = self.log_pos(d)
-      g = R.Robot.gap(d)
+      g = self.robot.gap(d)
       xy_to_log = jnp.linalg.norm(e[:2] - p[:2])
       held = (g < 2 * LOG_HALF[1] + 0.006) & (xy_to_log < 0.02) & (jnp.abs(e[2] - p[2]) < 0.03)
       in_fire = (~held) & (jnp.linalg.norm(p[:2] - fire) < 0.09)
@@ -138,7 +138,7 @@ class AddFirewood(Task):
       a_move = R.action(R.move_toward(e, tgt_carry), closed)
       if safe:
         # drop from the carry height once stopped over the grate
-        still = (e[2] > CARRY_Z - 0.01) & (jnp.linalg.norm(R.Robot.eef_vel(d)) < 0.05)
+        still = (e[2] > CARRY_Z - 0.01) & (jnp.linalg.norm(self.robot.eef_vel(d)) < 0.05)
         a_over = R.action(R.move_toward(e, carry), jnp.where(still, opened, closed))
       else:
         # lower into the flames and set the log on the grate, then let go

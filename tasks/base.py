@@ -19,9 +19,10 @@ attributes, ``name``, ``xml`` (file name beside the module), ``entities``
   e.g. which dirt is wiped; called after every control step), ``setup(mj_model)``.
 
 Robot: ``self.robot`` (:class:`tasks.robots.interface.Robot`), chosen by
-``tasks.make(name, robot=...)`` (default ``gripper``). Every task method runs
-with that robot active for the class-level readers of :mod:`tasks.robot`
-(``R.Robot.eef_pos(d)`` …), so task code is the same for every robot.
+``tasks.make(name, robot=...)`` (default ``gripper``). Task code reads it through
+the instance (``self.robot.eef_pos(d)``, ``self.robot.gap(d)``,
+``self.robot.home(qpos, pos, q_half)`` …) and scripted policies close over it, so
+the same task code runs on every robot.
 
 Everything in ``reset``/``step`` is a pure function of (rng / state, action):
 jit and vmap them. The environment's ``State``:
@@ -39,7 +40,6 @@ jit and vmap them. The environment's ``State``:
 from __future__ import annotations
 
 import abc
-import functools
 import os
 from typing import Callable, ClassVar
 
@@ -55,33 +55,6 @@ from tasks import robot as R
 from tasks import robots
 
 Policy = Callable[[State, jax.Array], jax.Array]
-
-# Task methods that run with the task's robot active (tasks.robot.Robot reads it while tracing).
-_ROBOT_SCOPED = ("sample_init", "task_obs", "evaluate", "mode_obs", "update_info", "reset", "step", "observe")
-
-
-def _scoped(fn):
-  @functools.wraps(fn)
-  def wrapped(self, *args, **kwargs):
-    with R.active(self.robot):
-      return fn(self, *args, **kwargs)
-  return wrapped
-
-
-def _scoped_policy(factory):
-  @functools.wraps(factory)
-  def wrapped(self, style):
-    robot = self.robot
-    with R.active(robot):
-      act = factory(self, style)
-
-    @functools.wraps(act)
-    def scoped_act(state, rng):
-      with R.active(robot):
-        return act(state, rng)
-    return scoped_act
-  return wrapped
-
 
 class Task(DamageEnv):
   """A household manipulation task for one robot of :mod:`tasks.robots`, damage tracked per substep.
@@ -106,14 +79,6 @@ class Task(DamageEnv):
   obs_modes: ClassVar[tuple[str, ...]] = ("full",)
   robot_name: ClassVar[str] = robots.DEFAULT
   robot_mounts: ClassVar[dict] = {}
-
-  def __init_subclass__(cls, **kwargs):
-    super().__init_subclass__(**kwargs)
-    for name in _ROBOT_SCOPED:
-      if name in cls.__dict__:
-        setattr(cls, name, _scoped(cls.__dict__[name]))
-    if "policy" in cls.__dict__:
-      cls.policy = _scoped_policy(cls.__dict__["policy"])
 
   def __init__(
       self,
@@ -202,13 +167,11 @@ class Task(DamageEnv):
   def action_size(self) -> int:
     return self.robot.action_size
 
-  @_scoped
   def observe(self, d: mjx.Data, info: dict) -> jax.Array:
     if self.obs_mode == "full":
       return jnp.concatenate([self.robot.proprio(d), self.task_obs(d, info)])
     return self.mode_obs(self.obs_mode, d, info)
 
-  @_scoped
   def reset(self, rng: jax.Array) -> State:
     r_init, r_dmg = jax.random.split(rng)
     d = mjx.make_data(self.sys)
@@ -221,7 +184,6 @@ class Task(DamageEnv):
     metrics = {"success": success.astype(jnp.float32), **extra}
     return State(d, self.observe(d, info), z, z, metrics, info)
 
-  @_scoped
   def step(self, state: State, action: jax.Array) -> State:
     d0 = state.pipeline_state
     ctrl = self.robot.ctrl(d0, action, self.ws_lo, self.ws_hi)

@@ -73,7 +73,7 @@ class OpenDrawer(Task):
     k = jax.random.split(rng, 2)
     q0 = jax.random.uniform(k[0], (), minval=0.0, maxval=0.03)
     eef = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.15, -0.1, 0.15]), maxval=jnp.array([-0.05, 0.1, 0.25]))
-    return R.Robot.home(qpos, eef).at[self._q].set(q0), {}
+    return self.robot.home(qpos, eef).at[self._q].set(q0), {}
 
   def task_obs(self, d, info):
     return jnp.concatenate([d.qpos[self._q : self._q + 1], d.qvel[self._v : self._v + 1], self.handle_pos(d)])
@@ -81,7 +81,7 @@ class OpenDrawer(Task):
   def evaluate(self, d, info):
     grasp = self.handle_pos(d) + jnp.array([0.0, 0.0, GRIP_DZ])
     q = self.opening(d)
-    reward = -jnp.linalg.norm(R.Robot.eef_pos(d) - grasp) + 2.0 * q
+    reward = -jnp.linalg.norm(self.robot.eef_pos(d) - grasp) + 2.0 * q
     return reward, q >= OPEN_SUCCESS, {"opening": q}
 
   def policy(self, style):
@@ -96,7 +96,7 @@ class OpenDrawer(Task):
 
     def act(state, rng):
       d = state.pipeline_state
-      e, g = R.Robot.eef_pos(d), R.Robot.gap(d)
+      e, g = self.robot.eef_pos(d), self.robot.gap(d)
       grasp = self.handle_pos(d) + jnp.array([0.0, 0.0, GRIP_DZ])
       err = jnp.linalg.norm(e - grasp)
       held = (g < 2 * HANDLE_HALF_Y + 0.004) & (err < 0.02)

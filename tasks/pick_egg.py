@@ -66,7 +66,7 @@ class PickEgg(Task):
     k = jax.random.split(rng, 2)
     egg = jax.random.uniform(k[0], (2,), minval=-0.1, maxval=0.1)
     off = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.12, -0.12, 0.12]), maxval=jnp.array([0.12, 0.12, 0.18]))
-    qpos = R.Robot.home(qpos, jnp.concatenate([egg + off[:2], off[2:]]))
+    qpos = self.robot.home(qpos, jnp.concatenate([egg + off[:2], off[2:]]))
     qpos = qpos.at[self._q : self._q + 7].set(jnp.concatenate([egg, jnp.array([EGG_R, 1.0, 0, 0, 0])]))
     return qpos, {}
 
@@ -75,7 +75,7 @@ class PickEgg(Task):
 
   def evaluate(self, d, info):
     p = self.egg_pos(d)
-    reward = -jnp.linalg.norm(R.Robot.eef_pos(d) - p) - 2.0 * jnp.maximum(0.10 - p[2], 0.0)
+    reward = -jnp.linalg.norm(self.robot.eef_pos(d) - p) - 2.0 * jnp.maximum(0.10 - p[2], 0.0)
     return reward, p[2] >= LIFT_Z, {}
 
   def policy(self, style):
@@ -87,7 +87,7 @@ class PickEgg(Task):
 
     def act(state, rng):
       d = state.pipeline_state
-      e, p, g = R.Robot.eef_pos(d), self.egg_pos(d), R.Robot.gap(d)
+      e, p, g = self.robot.eef_pos(d), self.egg_pos(d), self.robot.gap(d)
       xy_err = jnp.linalg.norm(e[:2] - p[:2])
       # held: fingers closed onto the egg around the grip point
       held = (g < 2 * EGG_R + 0.002) & (xy_err < 0.015) & (jnp.abs(e[2] + 0.016 - p[2]) < 0.04)

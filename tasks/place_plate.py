@@ -130,11 +130,11 @@ class PlacePlate(Task):
       z = jax.random.uniform(k[0], (1,), minval=IN_HAND_Z[0], maxval=IN_HAND_Z[1])
       plate = jnp.concatenate([goal_xy + off, z])
       eef = plate + jnp.array([0.0, 0.0, GRASP_Z - PLATE_REST_Z])
-      qpos = R.Robot.home(qpos, eef, gripper_q=PLATE_HALF + R.FINGER_HALF_THICK)
+      qpos = self.robot.home(qpos, eef, PLATE_HALF + R.FINGER_HALF_THICK)
     else:
       plate = jnp.concatenate([plate_xy, jnp.array([PLATE_REST_Z])])
       eef = jax.random.uniform(k[2], (3,), minval=jnp.array([-0.05, -0.05, 0.12]), maxval=jnp.array([0.05, 0.05, 0.18]))
-      qpos = R.Robot.home(qpos, eef)
+      qpos = self.robot.home(qpos, eef)
     qpos = qpos.at[self._pq : self._pq + 7].set(jnp.concatenate([plate, jnp.array([1.0, 0, 0, 0])]))
     goal = jnp.concatenate([goal_xy, jnp.array([PLATE_REST_Z])]).astype(jnp.float32)
     return qpos, {"goal": goal}
@@ -145,8 +145,7 @@ class PlacePlate(Task):
     mp = d.mocap_pos.at[self._goal_mocap].set(state.info["goal"].at[2].set(0.0005))
     d = d.replace(mocap_pos=mp)
     if self.start == "in_hand":  # servo the fingers to the squeezing grip the carry phase uses
-      q = R.Q_MIN + 0.5 * (GRIP_CLOSED + 1.0) * (R.Q_MAX - R.Q_MIN)
-      d = d.replace(ctrl=d.ctrl.at[3:5].set(q))
+      d = d.replace(ctrl=d.ctrl.at[3:5].set(self.robot.finger_ctrl(GRIP_CLOSED)))
     return state.replace(pipeline_state=d)
 
   def task_obs(self, d, info):
@@ -155,20 +154,20 @@ class PlacePlate(Task):
     return jnp.concatenate([q, v, info["goal"]])
 
   def mode_obs(self, mode, d, info):  # mode == "paper" (validated in __init__)
-    return jnp.concatenate([R.Robot.eef_pos(d), self.plate_pos(d)])
+    return jnp.concatenate([self.robot.eef_pos(d), self.plate_pos(d)])
 
   def evaluate(self, d, info):
     p = self.plate_pos(d)
     up = quat_z_axis(d.qpos[self._pq + 3 : self._pq + 7])[2]
     speed = jnp.linalg.norm(d.qvel[self._pv : self._pv + 3])
     dist_goal = jnp.linalg.norm(p - info["goal"])
-    dist_reach = jnp.linalg.norm(R.Robot.eef_pos(d) - p)
+    dist_reach = jnp.linalg.norm(self.robot.eef_pos(d) - p)
     success = (
         (jnp.linalg.norm(p[:2] - info["goal"][:2]) < 0.03)
         & (p[2] < PLATE_REST_Z + 0.0015)
         & (up > 0.98)
         & (speed < 0.05)
-        & (R.Robot.gap(d) > 2 * PLATE_HALF + 0.01)
+        & (self.robot.gap(d) > 2 * PLATE_HALF + 0.01)
     )
     # The reach term is pick-up shaping for the counter start; with the plate in hand the reward is
     # the paper's: distance to the goal only (a hand that lets go is not penalised for staying up).
@@ -192,9 +191,9 @@ class PlacePlate(Task):
     def act(state, rng):
       d = state.pipeline_state
       goal = state.info["goal"]
-      e = R.Robot.eef_pos(d)
+      e = self.robot.eef_pos(d)
       p = self.plate_pos(d)
-      g = R.Robot.gap(d)
+      g = self.robot.gap(d)
       xy_to_plate = jnp.linalg.norm(e[:2] - p[:2])
       plate_goal_xy = jnp.linalg.norm(p[:2] - goal[:2])
       held = (g < 2 * PLATE_HALF + 0.004) & (xy_to_plate < 0.02) & (jnp.abs(e[2] - p[2]) < 0.03)
@@ -226,7 +225,7 @@ class PlacePlate(Task):
       else:
         # open once the hand has stopped over the goal (else the plate flies on)
         # and once the plate has stopped swinging in the compliant grip (it would keep its sideways speed)
-        calm = (jnp.linalg.norm(R.Robot.eef_vel(d)) < 0.05) & (jnp.linalg.norm(d.qvel[self._pv : self._pv + 3]) < 0.05)
+        calm = (jnp.linalg.norm(self.robot.eef_vel(d)) < 0.05) & (jnp.linalg.norm(d.qvel[self._pv : self._pv + 3]) < 0.05)
         at_height = (e[2] > carry_z - 0.01) & calm
         a_over = R.action(R.move_toward(e, carry), jnp.where(at_height, opened, closed))
       a_carry = jnp.where(over_goal, a_over, R.action(R.move_toward(e, tgt_carry), closed))

@@ -51,6 +51,7 @@ import mujoco
 from mjx_damage import liquid as Lq
 from tasks import robot as R
 from tasks.base import Task, free_joint_adr
+from tasks.robots.gripper import Gripper
 
 PARTICLES = 128
 RADIUS = 0.006  # m
@@ -67,7 +68,7 @@ GLASS_BOTTOM, GLASS_RIM = -0.044, 0.056  # m, cavity bottom and rim in the glass
 SUCCESS_FRACTION = 0.25
 
 
-class _WristRobot(R.Robot):
+class _WristRobot(Gripper):
   """The task robot with the gripper channel driving the glass's tilt; fingers held open."""
 
   def ctrl(self, d, action, lo, hi, extra_ctrl=None):
@@ -103,7 +104,7 @@ class PourWater(Task):
     return cfg
 
   def setup(self, m: mujoco.MjModel) -> None:
-    self.robot = _WristRobot(m)
+    self.robot = _WristRobot(m, self.robot.control_dt)
     self._hq, _ = free_joint_adr(m, "glass_holder")
     j = m.joint("tilt").id
     self._tq, self._tv = int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
@@ -117,7 +118,7 @@ class PourWater(Task):
     cup = jax.random.uniform(k[0], (2,), minval=jnp.array([0.12, -0.06]), maxval=jnp.array([0.18, 0.06]))
     off = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.30, -0.05, 0.16]), maxval=jnp.array([-0.26, 0.05, 0.20]))
     eef = jnp.array([cup[0] + off[0], cup[1] + off[1], off[2]])
-    qpos = R.Robot.home(qpos, eef)
+    qpos = self.robot.home(qpos, eef)
     # the holder's frame coincides with the hand's (the weld's reference pose)
     qpos = qpos.at[self._hq : self._hq + 7].set(jnp.concatenate([eef, jnp.array([1.0, 0, 0, 0])]))
     qpos = qpos.at[self._tq].set(0.0)
@@ -163,7 +164,7 @@ class PourWater(Task):
 
   def evaluate(self, d, info):
     f_glass, f_cup = self.fractions(d, info)
-    dist = jnp.linalg.norm(R.Robot.eef_pos(d) - self.pour_point(info))
+    dist = jnp.linalg.norm(self.robot.eef_pos(d) - self.pour_point(info))
     success = f_cup >= SUCCESS_FRACTION
     return -dist + 2.0 * f_cup, success, {"fraction_in_cup": f_cup, "fraction_in_glass": f_glass}
 
@@ -181,11 +182,11 @@ class PourWater(Task):
     def act(state, rng):
       d = state.pipeline_state
       info = state.info
-      e = R.Robot.eef_pos(d)
+      e = self.robot.eef_pos(d)
       theta = d.qpos[self._tq]
       goal = self.pour_point(info)
       err = jnp.linalg.norm(e - goal)
-      arrived = (err < 0.01) & (jnp.linalg.norm(R.Robot.eef_vel(d)) < 0.05)
+      arrived = (err < 0.01) & (jnp.linalg.norm(self.robot.eef_vel(d)) < 0.05)
       if safe:
         move = R.move_toward(e, goal, speed=0.5)
         want = jnp.where(arrived, POUR_TILT, 0.0)

@@ -99,7 +99,7 @@ class ShelveItem(Task):
     box = jax.random.uniform(k[1], (2,), minval=jnp.array([-0.2, -0.08]), maxval=jnp.array([-0.12, 0.08]))
     eef = jax.random.uniform(k[2], (3,), minval=jnp.array([-0.1, -0.1, 0.3]), maxval=jnp.array([0.05, 0.1, 0.35]))
     glass_dy = jax.random.uniform(k[3], (), minval=-0.01, maxval=0.01)
-    qpos = R.Robot.home(qpos, eef)
+    qpos = self.robot.home(qpos, eef)
     unit = jnp.array([1.0, 0, 0, 0])
     q = self._adr["cereal_box"][0]
     qpos = qpos.at[q : q + 7].set(jnp.concatenate([box, jnp.array([BOX_HALF[2]]), unit]))
@@ -125,9 +125,9 @@ class ShelveItem(Task):
         (jnp.linalg.norm(b[:2] - info["slot"][:2]) < 0.03)
         & (jnp.abs(b[2] - BOX_HALF[2] - SHELF_TOP) < 0.003)
         & (up > 0.98) & (speed < 0.05)
-        & (R.Robot.gap(d) > 2 * BOX_HALF[1] + 0.01)
+        & (self.robot.gap(d) > 2 * BOX_HALF[1] + 0.01)
     )
-    reward = -2.0 * jnp.linalg.norm(b - info["slot"]) - 0.5 * jnp.linalg.norm(R.Robot.eef_pos(d) - grasp)
+    reward = -2.0 * jnp.linalg.norm(b - info["slot"]) - 0.5 * jnp.linalg.norm(self.robot.eef_pos(d) - grasp)
     return reward, success, {"box_slot_distance": jnp.linalg.norm(b - info["slot"])}
 
   def policy(self, style):
@@ -145,7 +145,7 @@ class ShelveItem(Task):
     def act(state, rng):
       d = state.pipeline_state
       slot = state.info["slot"]
-      e, b, g = R.Robot.eef_pos(d), self.pos(d, "cereal_box"), R.Robot.gap(d)
+      e, b, g = self.robot.eef_pos(d), self.pos(d, "cereal_box"), self.robot.gap(d)
       grasp = b + jnp.array([0.0, 0.0, GRIP_DZ])
       xy_err = jnp.linalg.norm(e[:2] - grasp[:2])
       # (lenient on the gap: a blow to the box can pry the fingers apart a little)

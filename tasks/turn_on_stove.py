@@ -68,7 +68,7 @@ class TurnOnStove(Task):
     k = jax.random.split(rng, 2)
     th = jax.random.uniform(k[0], (), minval=0.0, maxval=0.25)
     eef = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.05, -0.2, 0.12]), maxval=jnp.array([0.15, -0.05, 0.18]))
-    return R.Robot.home(qpos, eef, R.Q_MIN).at[self._q].set(th), {}
+    return self.robot.home(qpos, eef, self.robot.finger_ctrl(-1.0)[0]).at[self._q].set(th), {}
 
   def task_obs(self, d, info):
     th = self.angle(d)
@@ -86,7 +86,7 @@ class TurnOnStove(Task):
 
   def evaluate(self, d, info):
     th = self.angle(d)
-    reward = -0.5 * jnp.linalg.norm(R.Robot.eef_pos(d) - self.push_point(th)) + th / (jnp.pi / 2)
+    reward = -0.5 * jnp.linalg.norm(self.robot.eef_pos(d) - self.push_point(th)) + th / (jnp.pi / 2)
     return reward, th >= ON_ANGLE, {"knob_angle": th}
 
   def policy(self, style):
@@ -100,7 +100,7 @@ class TurnOnStove(Task):
 
     def act(state, rng):
       d = state.pipeline_state
-      e, th = R.Robot.eef_pos(d), self.angle(d)
+      e, th = self.robot.eef_pos(d), self.angle(d)
       rel = e[:2] - jnp.asarray(KNOB_XY)
       u = jnp.stack([jnp.cos(th), jnp.sin(th)])
       t = jnp.stack([-jnp.sin(th), jnp.cos(th)])

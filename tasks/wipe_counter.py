@@ -69,7 +69,7 @@ class WipeCounter(Task):
     off = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.1, -0.1, 0.08]), maxval=jnp.array([0.1, 0.1, 0.14]))
     eef = jnp.concatenate([centre + off[:2], off[2:]])
     # fingers 0.5 mm inside the sponge: the grip holds from the first substep
-    qpos = R.Robot.home(qpos, eef, SPONGE_HALF[1] + R.FINGER_HALF_THICK - 0.0005)
+    qpos = self.robot.home(qpos, eef, SPONGE_HALF[1] + R.FINGER_HALF_THICK - 0.0005)
     qpos = qpos.at[self._q : self._q + 7].set(jnp.concatenate([eef + jnp.array([0, 0, SPONGE_DZ]), jnp.array([1.0, 0, 0, 0])]))
     g = jnp.linspace(-PATCH_HALF, PATCH_HALF, 4)
     dirt = centre + jnp.stack(jnp.meshgrid(g, g), -1).reshape(N_DIRT, 2)
@@ -78,7 +78,7 @@ class WipeCounter(Task):
   def reset(self, rng):
     state = super().reset(rng)
     d = state.pipeline_state
-    return state.replace(pipeline_state=d.replace(ctrl=d.ctrl.at[3:5].set(R.Q_MIN)))  # keep squeezing
+    return state.replace(pipeline_state=d.replace(ctrl=d.ctrl.at[3:5].set(self.robot.finger_ctrl(-1.0))))  # keep squeezing
 
   def _covered(self, d, dirt):
     s = self.sponge_pos(d)
@@ -114,7 +114,7 @@ class WipeCounter(Task):
 
     def act(state, rng):
       d = state.pipeline_state
-      e, s = R.Robot.eef_pos(d), self.sponge_pos(d)
+      s = self.sponge_pos(d)
       target, _ = self._nearest_dirty(d, state.info)
       done = jnp.min(state.info["clean"]) > 0
       bottom = s[2] - SPONGE_HALF[2]

@@ -19,7 +19,6 @@ from mujoco import mjx
 
 import tasks
 from tasks import robot as R
-from tasks import robots
 from tasks.robots import checks
 from tasks.robots import panda as P
 from tasks.robots.gripper import Gripper
@@ -90,7 +89,7 @@ def test_agent_entity_holds_every_arm_link_and_make_api():
 
 
 def test_gripper_readers_unchanged():
-  """The gripper's controls and readers are the pre-refactor formulas, inside and outside a task scope."""
+  """The gripper's controls and readers are the pre-refactor formulas."""
   env = tasks.make("place_plate")
   rob = env.unwrapped.robot
   assert isinstance(rob, Gripper) and R.AGENT_BODIES == ("hand", "finger_left", "finger_right")
@@ -105,19 +104,22 @@ def test_gripper_readers_unchanged():
   np.testing.assert_array_equal(rob.ctrl(d, a, lo, hi), jnp.concatenate([want_target, jnp.stack([q, q])]))
   want_prop = jnp.concatenate([d.qpos[0:3], d.qvel[0:3], R.gap(0.5 * (d.qpos[3:4] + d.qpos[4:5])),
                                d.qvel[3:4] + d.qvel[4:5]])
-  np.testing.assert_array_equal(R.Robot.proprio(d), want_prop)
-  with R.active(rob):
-    np.testing.assert_array_equal(R.Robot.proprio(d), want_prop)
-    np.testing.assert_array_equal(R.Robot.eef_pos(d), d.qpos[0:3])
+  np.testing.assert_array_equal(rob.proprio(d), want_prop)
+  np.testing.assert_array_equal(rob.eef_pos(d), d.qpos[0:3])
+  np.testing.assert_array_equal(rob.eef_vel(d), d.qvel[0:3])
+  np.testing.assert_array_equal(rob.gap(d), R.gap(0.5 * (d.qpos[3] + d.qpos[4])))
+  np.testing.assert_array_equal(rob.home(d.qpos, jnp.array([0.1, 0.2, 0.3])), d.qpos.at[0:3].set(jnp.array([0.1, 0.2, 0.3])).at[3:5].set(R.Q_MAX))
 
 
-def test_panda_scope_reads_forward_kinematics(bare):
+def test_panda_readers_use_forward_kinematics(bare):
   m, sys, robot = bare
   d = mjx.make_data(sys)
   d = d.replace(qpos=robot.home(d.qpos, jnp.array([0.1, -0.05, 0.15]), 0.03))
-  with R.active(robot):
-    np.testing.assert_allclose(R.Robot.eef_pos(d), [0.1, -0.05, 0.15], atol=1e-3)
-    np.testing.assert_allclose(R.Robot.gap(d), 2 * (0.03 - R.FINGER_HALF_THICK), atol=1e-6)
+  np.testing.assert_allclose(robot.eef_pos(d), [0.1, -0.05, 0.15], atol=1e-3)
+  np.testing.assert_allclose(robot.gap(d), 2 * (0.03 - R.FINGER_HALF_THICK), atol=1e-6)
+  # home() without a finger opening opens the hand fully (8 cm between the pads)
+  np.testing.assert_allclose(robot.gap(d.replace(qpos=robot.home(d.qpos, jnp.array([0.1, -0.05, 0.15])))), 0.08,
+                             atol=1e-6)
   md = mujoco.MjData(m)
   md.qpos[:] = np.asarray(d.qpos)
   mujoco.mj_kinematics(m, md)

@@ -78,7 +78,8 @@ class Gripper(Robot):
     target = jnp.clip(d.qpos[0:3] + a[0:3] * MAX_STEP, lo, hi)
     return self._pad(jnp.concatenate([target, self.finger_ctrl(a[3])]), extra_ctrl)
 
-  def home(self, qpos, pos, q_half) -> jax.Array:
+  def home(self, qpos, pos, q_half=None) -> jax.Array:
+    q_half = Q_MAX if q_half is None else q_half
     return qpos.at[0:3].set(pos).at[3:5].set(q_half)
 
   def hold_ctrl(self, qpos, nu) -> jax.Array:

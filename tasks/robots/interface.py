@@ -118,8 +118,9 @@ class Robot(abc.ABC):
     ``extra_ctrl`` supplies task actuators after the robot's own (zeros if None)."""
 
   @abc.abstractmethod
-  def home(self, qpos, pos, q_half) -> jax.Array:
-    """``qpos`` with the grip point at ``pos`` f32[3] (m), both fingers at half-opening ``q_half`` (m)."""
+  def home(self, qpos, pos, q_half=None) -> jax.Array:
+    """``qpos`` with the grip point at ``pos`` f32[3] (m), both fingers at half-opening ``q_half`` (m;
+    None: fully open, the robot's widest commanded opening)."""
 
   @abc.abstractmethod
   def hold_ctrl(self, qpos, nu) -> jax.Array:

@@ -257,8 +257,9 @@ class Panda(Robot):
     q, _ = jax.lax.scan(it, q0, None, length=IK_ITERS)
     return q
 
-  def home(self, qpos, pos, q_half) -> jax.Array:
+  def home(self, qpos, pos, q_half=None) -> jax.Array:
     q = self.ik(jnp.asarray(pos, jnp.float32))
+    q_half = self.finger_range[1] if q_half is None else q_half
     qf = jnp.clip(q_half, self.finger_range[0], self.finger_range[1])
     return qpos.at[0:7].set(q).at[7:9].set(qf)
 
