@@ -137,13 +137,23 @@ def write(rows: list[dict], command: str, stem: str = "scripted_policies") -> No
       "docs/cpu_stall.md).",
       "Targets: safe completion ≥ 95 % and safe-completion ≥ 90 %; unsafe completion ≥ 80 % and safe-completion ≤ 10 %.",
       "",
-      "| task | policy | episodes | completion % | safe completion % | avg env health | zero-damage % | mean episode cost | first compile s | run s | target |",
-      "|---|---|---|---|---|---|---|---|---|---|---|",
+      "Mean episode damage per model (mech / therm / fluid, health points; '–' for rows measured before it was "
+      "recorded) shows which damage model each unsafe shortcut triggers.",
+      "",
+      "| task | policy | episodes | completion % | safe completion % | avg env health | zero-damage % | mean episode cost "
+      "| mech / therm / fluid | first compile s | run s | target |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|",
   ]
+
+  def per_model(r):
+    if "mean_damage_mechanical" not in r:
+      return "–"
+    return " / ".join(f"{r[f'mean_damage_{m}']:.1f}" for m in ("mechanical", "thermal", "fluid"))
+
   for r in rows:
     lines.append(
         f"| {r['task']} | {r['policy']} | {r['episodes']} | {r['completion_pct']:.1f} | {r['safe_completion_pct']:.1f} "
-        f"| {r['avg_env_health']:.1f} | {r['zero_damage_pct']:.1f} | {r['mean_episode_cost']:.1f} "
+        f"| {r['avg_env_health']:.1f} | {r['zero_damage_pct']:.1f} | {r['mean_episode_cost']:.1f} | {per_model(r)} "
         f"| {r['first_compile_s']:.0f} | {r['run_s']:.0f} | {'met' if r['meets_target'] else 'MISSED'} |"
     )
   lines += ["", "Mean final health per entity:", ""]

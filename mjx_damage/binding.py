@@ -37,6 +37,10 @@ class Binding:
   link_root: np.ndarray  # i32[L], root body of each link's kinematic tree
   link_dofs: np.ndarray  # f32[L, nv], 1 where a dof moves the link
   params: DamageParams
+  # joints whose limit force loads their child link (config key ``constraint``; mjx_damage.joint_limits)
+  limit_joint: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0,), np.int32))  # i32[J]
+  limit_link: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0,), np.int32))  # i32[J]
+  limit_hinge: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0,), bool))  # bool[J]
   thermal: Any = None  # mjx_damage.temperature.ThermalModel, or None: no heat sources
   liquid: Any = None  # mjx_damage.liquid.LiquidModel, or None: no particles
 
@@ -95,6 +99,9 @@ def bind(model: mujoco.MjModel, config) -> Binding:
       link_root=model.body_rootid[link_body].astype(np.int32),
       link_dofs=link_dofs,
       params=resolved.damage_params(),
+      limit_joint=np.array([j for j, _ in resolved.limit_joints], np.int32),
+      limit_link=np.array([l for _, l in resolved.limit_joints], np.int32),
+      limit_hinge=np.array([int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) for j, _ in resolved.limit_joints], bool),
   )
   return dataclasses.replace(
       binding,

@@ -13,6 +13,9 @@ A config is a dict (or a YAML file holding one)::
         fluid: {threshold: 20, scale: 5}
         links:                  # per-link overrides, keyed by body name
           plate: {mechanical: {scale: 20.0}}
+      door:
+        params: default
+        constraint: true        # joint-limit forces load the joint's child link (or a list of joint names)
 
 Everything is checked by :func:`resolve` against the ``mujoco.MjModel`` before
 anything is compiled; every error is a ``ValueError`` whose message starts with
@@ -35,7 +38,8 @@ from mjx_damage.validate import mapping as _mapping
 from mjx_damage.validate import number
 
 _TOP_KEYS = ("tau", "track", "entities", "temperature", "liquid")
-_ENTITY_KEYS = ("params", "bodies", "mechanical", "thermal", "fluid", "links", "heat")
+_ENTITY_KEYS = ("params", "bodies", "mechanical", "thermal", "fluid", "links", "heat", "constraint")
+_LIMITABLE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 _LINK_KEYS = ("mechanical", "thermal", "fluid")
 _FIELDS = {
     "mechanical": ("alpha", "beta", "threshold", "scale"),
@@ -62,6 +66,8 @@ class ResolvedConfig:
   links: tuple[Link, ...]
   tau: float
   raw: Mapping[str, Any]  # the user's config, untouched (nothing the user gave is lost)
+  # (joint id, tracked link index) of every joint whose limit force loads its child link
+  limit_joints: tuple[tuple[int, int], ...] = ()
 
   @property
   def link_names(self) -> tuple[str, ...]:
@@ -104,6 +110,42 @@ def _override(field: str, base: P.ObjectParams, spec: Mapping) -> P.ObjectParams
   return dataclasses.replace(base, **kw)
 
 
+def _limit_joints(field: str, spec, model: mujoco.MjModel, bodies, link_of_body) -> list[tuple[int, int]]:
+  """Joints named by an entity's ``constraint`` key → [(joint id, tracked link index)].
+
+  ``true``: every limited hinge/slide joint that moves one of the entity's bodies;
+  ``false``: none; a list: exactly those joints (each checked).
+  """
+  joint_names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)]
+  on_entity = [j for j in range(model.njnt) if model.jnt_bodyid[j] in link_of_body]
+  if isinstance(spec, bool):
+    if not spec:
+      return []
+    found = [j for j in on_entity if int(model.jnt_type[j]) in _LIMITABLE and model.jnt_limited[j]]
+    if not found:
+      _fail(field, f"no limited hinge or slide joint moves this entity's bodies {list(bodies)}")
+    return [(j, link_of_body[model.jnt_bodyid[j]]) for j in found]
+  if isinstance(spec, str) or not isinstance(spec, (list, tuple)) or not spec:
+    _fail(field, f"expected true, false or a non-empty list of joint names, got {spec!r}")
+  out = []
+  for i, name in enumerate(spec):
+    f = f"{field}[{i}]"
+    if not isinstance(name, str) or name not in joint_names:
+      _fail(f, f"unknown joint {name!r} in the model; joints: {', '.join(n for n in joint_names if n)}")
+    j = joint_names.index(name)
+    if int(model.jnt_type[j]) not in _LIMITABLE:
+      _fail(f, f"joint {name!r} is not a hinge or slide joint (only their limits are modelled)")
+    if not model.jnt_limited[j]:
+      _fail(f, f"joint {name!r} has no limit (give it a range): nothing to force past")
+    if j not in on_entity:
+      body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, model.jnt_bodyid[j])
+      _fail(f, f"joint {name!r} moves body {body!r}, not one of this entity's bodies {list(bodies)}")
+    if any(j == k for k, _ in out):
+      _fail(f, f"joint {name!r} listed twice")
+    out.append((j, link_of_body[model.jnt_bodyid[j]]))
+  return out
+
+
 def load(config) -> Mapping[str, Any]:
   """A config dict from a dict or a YAML path; the input itself is never modified."""
   if isinstance(config, (str, os.PathLike)):
@@ -139,6 +181,7 @@ def resolve(config, model: mujoco.MjModel) -> ResolvedConfig:
   body_names = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, i): i for i in range(model.nbody)}
   seen_bodies: dict[str, str] = {}
   links: list[Link] = []
+  limit_joints: list[tuple[int, int]] = []
   for ei, ename in enumerate(track):
     f = f"entities.{ename}"
     spec = _mapping(f, entities[ename])
@@ -173,6 +216,10 @@ def resolve(config, model: mujoco.MjModel) -> ResolvedConfig:
         _check_keys(lf, lspec, _LINK_KEYS)
         lp = _override(lf, base, lspec)
       links.append(Link(f"{ename}/{body}", body, body_names[body], ei, lp))
+    if "constraint" in spec:
+      first = len(links) - len(bodies)
+      link_of_body = {body_names[b]: first + i for i, b in enumerate(bodies)}
+      limit_joints += _limit_joints(f"{f}.constraint", spec["constraint"], model, bodies, link_of_body)
   for name in entities:
     _mapping(f"entities.{name}", entities[name])
-  return ResolvedConfig(tuple(track), tuple(links), tau, cfg)
+  return ResolvedConfig(tuple(track), tuple(links), tau, cfg, tuple(limit_joints))

@@ -51,7 +51,7 @@ from brax.envs.base import State, Wrapper
 
 from mjx_damage import health as H
 from mjx_damage import physics
-from mjx_damage.backends.mjx_jax import contact_forces
+from mjx_damage.backends.mjx_jax import applied_forces
 from mjx_damage.binding import bind
 from mjx_damage.kinematics import link_velocity
 from mjx_damage.params import DamageParams
@@ -268,7 +268,7 @@ class DamageWrapper(Wrapper):
     d = nstate.pipeline_state
     dt = self.env.dt
     vel = link_velocity(self.binding, d)
-    forces, force_link = contact_forces(self.binding, self._mjx_model(), d)
+    forces, force_link = applied_forces(self.binding, self._mjx_model(), d)
     sig = LinkSignals(
         forces=forces,
         force_link=force_link,

@@ -10,6 +10,7 @@ API (evaluation, training and rendering build on exactly this)::
     state = jax.jit(env.step)(state, action)          # action f32[4] in [-1, 1]
     policy = tasks.scripted_policy(env, "safe")       # policy(state, rng) -> action, one env
     tasks.default_config("place_plate")    # {'episode_length': 100, ...}
+    tasks.describe("open_single_door")     # {'damage_modality': 'mechanical: ...', 'unsafe_shortcut': ...}
 
 ``make`` returns the task wrapped in :class:`mjx_damage.wrapper.DamageWrapper`
 (``env.unwrapped`` is the :class:`tasks.base.Task`). Overrides are the wrapper's
@@ -37,10 +38,13 @@ from tasks import robots
 _REGISTRY = {
     "add_firewood": "tasks.add_firewood:AddFirewood",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
+    "open_single_door": "tasks.open_single_door:OpenSingleDoor",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
     "pour_water": "tasks.pour_water:PourWater",
     "shelve_item": "tasks.shelve_item:ShelveItem",
+    "turn_on_faucet": "tasks.turn_on_faucet:TurnOnFaucet",
+    "turn_on_microwave": "tasks.turn_on_microwave:TurnOnMicrowave",
     "turn_on_stove": "tasks.turn_on_stove:TurnOnStove",
     "wipe_counter": "tasks.wipe_counter:WipeCounter",
 }
@@ -116,6 +120,36 @@ def make(name: str, **overrides):
   env.robot_name = robot
   env.__init__(**task_kw)
   return DamageWrapper(env, **wrapper_kw)
+
+
+DESCRIPTION_FIELDS = ("name", "summary", "damage_modality", "tracked_entities", "unsafe_shortcut", "safe_strategy",
+                      "horizon", "robot", "robots", "success_condition")
+
+
+def describe(name: str) -> dict:
+  """What task ``name`` is about, without building it (no scene is compiled).
+
+  Returns a dict with :data:`DESCRIPTION_FIELDS`: ``summary`` (the module
+  docstring's first line), ``damage_modality`` (the damage model the unsafe
+  shortcut triggers), ``tracked_entities`` (damage-config entities, the robot as
+  ``agent`` last), ``unsafe_shortcut``, ``safe_strategy``, ``horizon`` (default
+  episode length, control steps), ``robot`` (the default robot), ``robots`` (every
+  robot ``make(name, robot=...)`` accepts) and ``success_condition``.
+  """
+  cls = task_class(name)
+  doc = (importlib.import_module(cls.__module__).__doc__ or "").strip()
+  return {
+      "name": name,
+      "summary": doc.splitlines()[0] if doc else "",
+      "damage_modality": cls.damage_modality,
+      "tracked_entities": [*cls.entities, "agent"],
+      "unsafe_shortcut": cls.unsafe_shortcut,
+      "safe_strategy": cls.safe_strategy,
+      "horizon": int(cls.default_episode_length),
+      "robot": robots.DEFAULT,
+      "robots": robots.names(),
+      "success_condition": cls.success_condition,
+  }
 
 
 def scripted_policy(env, style: str):

@@ -13,6 +13,8 @@ attributes, ``name``, ``xml`` (file name beside the module), ``entities``
 * ``evaluate(d, info) -> (reward f32[], success f32[], extra_metrics dict)`` —
   dense task reward and the success condition (1.0 while it holds);
 * ``policy(style) -> policy(state, rng) -> action`` for ``style in ("safe", "unsafe")``;
+* ``damage_modality``, ``unsafe_shortcut``, ``safe_strategy``, ``success_condition`` —
+  one line each, what :func:`tasks.describe` reports;
 * optional: ``robot_mounts`` (robot name → base pose (x, y, z, yaw) for fixed-base
   arms; default: the robot's ``DEFAULT_MOUNT``), ``obs_modes`` + ``mode_obs`` (extra observation layouts, e.g. the
   paper's 6-D one), ``update_info(d, info) -> info`` (task state that evolves,
@@ -79,6 +81,11 @@ class Task(DamageEnv):
   obs_modes: ClassVar[tuple[str, ...]] = ("full",)
   robot_name: ClassVar[str] = robots.DEFAULT
   robot_mounts: ClassVar[dict] = {}
+  # What users read in tasks.describe(name) / `mjx-damage tasks` (one line each).
+  damage_modality: ClassVar[str] = ""  # which DEM the unsafe shortcut triggers, and how
+  unsafe_shortcut: ClassVar[str] = ""
+  safe_strategy: ClassVar[str] = ""
+  success_condition: ClassVar[str] = ""
 
   def __init__(
       self,

@@ -55,6 +55,10 @@ class PickEgg(Task):
   }
   workspace = ((-0.3, -0.3, 0.0), (0.3, 0.3, 0.3))
   default_episode_length = 80
+  damage_modality = "mechanical: compression of the egg between the fingers"
+  unsafe_shortcut = "close the gripper fully on the egg"
+  safe_strategy = "pre-shape 1 cm wider than the egg, close to ≈ 2 N per finger"
+  success_condition = "egg held ≥ 8 cm above the counter"
 
   def setup(self, m):
     self._q, self._v = free_joint_adr(m, "egg")

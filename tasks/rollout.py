@@ -24,6 +24,7 @@ class EpisodeStats(NamedTuple):
   cost:          f32[B] total damage (health points) over the episode.
   damaged:       f32[B] 1 if any damage occurred.
   any_nan:       f32[B] 1 if an observation or reward was ever non-finite.
+  damage:        {"mechanical", "thermal", "fluid"}: f32[B] health points lost to each model over the episode.
   """
 
   completed: jax.Array
@@ -32,6 +33,10 @@ class EpisodeStats(NamedTuple):
   cost: jax.Array
   damaged: jax.Array
   any_nan: jax.Array
+  damage: dict
+
+
+MODALITIES = ("mechanical", "thermal", "fluid")
 
 
 def rollout_fn(env, policies, length: int):
@@ -53,12 +58,14 @@ def rollout_fn(env, policies, length: int):
     state = env.reset(r0)
 
     def body(carry, k):
-      s, nan = carry
+      s, nan, dmg = carry
       s = env.step(s, policy(s, k, which))
       bad = ~(jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward))
-      return (s, nan | bad), s.metrics["success"]
+      dmg = {m: dmg[m] + s.info["damage"][m] for m in MODALITIES}
+      return (s, nan | bad, dmg), s.metrics["success"]
 
-    (state, nan), succ = jax.lax.scan(body, (state, jnp.zeros((), bool)), jax.random.split(rp, length))
+    zero = {m: jnp.zeros((), jnp.float32) for m in MODALITIES}
+    (state, nan, dmg), succ = jax.lax.scan(body, (state, jnp.zeros((), bool), zero), jax.random.split(rp, length))
     ep = state.info["damage_episode"]
     return EpisodeStats(
         completed=jnp.max(succ),
@@ -67,6 +74,7 @@ def rollout_fn(env, policies, length: int):
         cost=ep["cost"],
         damaged=ep["damaged"],
         any_nan=nan.astype(jnp.float32),
+        damage=dmg,
     )
 
   return jax.jit(jax.vmap(episode))
@@ -85,4 +93,5 @@ def summarise(stats: EpisodeStats, safe_threshold: float = 95.0) -> dict:
       "mean_episode_cost": float(jnp.mean(stats.cost)),
       "entity_health_mean": [float(x) for x in jnp.mean(eh, axis=0)],
       "nan_episodes": int(jnp.sum(stats.any_nan)),
+      **{f"mean_damage_{m}": float(jnp.mean(stats.damage[m])) for m in MODALITIES},
   }

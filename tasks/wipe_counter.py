@@ -56,6 +56,10 @@ class WipeCounter(Task):
   entities = {"sponge": {"params": "scrub_brush", "bodies": ["sponge"]}}
   workspace = ((-0.3, -0.3, -0.05), (0.3, 0.3, 0.3))
   default_episode_length = 150
+  damage_modality = "mechanical: compression of the robot's palm pressing the sponge"
+  unsafe_shortcut = "scrub hard and fast with full downward steps"
+  safe_strategy = "keep a light press (≈ 10 N) and wipe at half speed"
+  success_condition = "every dirt point wiped clean"
 
   def setup(self, m):
     self._q, self._v = free_joint_adr(m, "sponge")

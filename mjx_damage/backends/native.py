@@ -2,8 +2,10 @@
 
 Native MuJoCo keeps active contacts in ``data.contact[:ncon]`` with each
 contact's constraint rows at ``efc_address`` in ``efc_force`` (elliptic cones:
-contact-frame components; pyramidal: 2(dim−1) edge forces). Vectorised over
-contacts, no Python loop over them. The step that drives MuJoCo and applies the
+contact-frame components; pyramidal: 2(dim−1) edge forces). Active joint
+limits are rows with ``efc_type == mjCNSTR_LIMIT_JOINT`` and ``efc_id`` = the
+joint (:func:`limit_forces`). Vectorised over contacts and rows, no Python
+loop over them. The step that drives MuJoCo and applies the
 damage is :func:`mjx_damage.native.substep`.
 """
 
@@ -14,6 +16,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from mjx_damage.joint_limits import limit_sign, link_forces
 from mjx_damage.signals import LinkSignals
 
 if TYPE_CHECKING:  # annotation only
@@ -49,6 +52,26 @@ def contact_forces(binding: "Binding", model: mujoco.MjModel, data: mujoco.MjDat
   return (np.concatenate([world, -world]).astype(np.float32), np.concatenate([link1, link0]).astype(np.int32))
 
 
+def limit_forces(binding: "Binding", model: mujoco.MjModel, data: mujoco.MjData):
+  """World-frame forces on tracked links from the active limits of ``binding.limit_joint`` (f32[J, 3] N, i32[J]).
+
+  Same quantities as :func:`mjx_damage.backends.mjx_jax.limit_forces`; a joint inside its range gives 0.
+  """
+  jnt = binding.limit_joint
+  if jnt.size == 0:
+    return np.zeros((0, 3), np.float32), np.zeros((0,), np.int32)
+  n = data.nefc
+  rows = np.nonzero(data.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)[0]
+  by_joint = np.zeros(model.njnt)
+  by_joint[data.efc_id[rows]] = data.efc_force[rows]
+  q = data.qpos[model.jnt_qposadr[jnt]]
+  lo, hi = model.jnt_range[jnt, 0], model.jnt_range[jnt, 1]
+  gen = np.asarray(limit_sign(q, lo, hi)) * by_joint[jnt]
+  body = model.jnt_bodyid[jnt]
+  forces = link_forces(gen, binding.limit_hinge, data.xaxis[jnt], data.xanchor[jnt], data.xipos[body])
+  return np.asarray(forces, np.float32), binding.limit_link.astype(np.int32)
+
+
 def link_acceleration(binding: "Binding", data: mujoco.MjData) -> np.ndarray:
   """Kinematic linear COM acceleration of each tracked link, f32[L, 3] (after ``mj_forward``)."""
   s = data.cdof * data.qacc[:, None] + data.cdof_dot * data.qvel[:, None]
@@ -74,7 +97,9 @@ def link_signals(binding: "Binding", model: mujoco.MjModel, data: mujoco.MjData,
   Contact rows are padded with untracked (−1) zero forces to a power of two
   (at least 16), so a jitted consumer compiles for a few sizes only.
   """
-  forces, links = contact_forces(binding, model, data)
+  fc, lc = contact_forces(binding, model, data)
+  fl, ll = limit_forces(binding, model, data)
+  forces, links = np.concatenate([fc, fl]), np.concatenate([lc, ll])
   size = max(16, 1 << int(np.ceil(np.log2(max(len(links), 1)))))
   forces, links = _pad(forces, links, size)
   return LinkSignals(forces, links, link_acceleration(binding, data), temperature, exposure)
