@@ -75,18 +75,20 @@ def main(argv=None) -> int:
   rows = []
   for task in args.tasks.split(","):
     env = tasks.make(task)
-    state = MEM.state_bytes(env)
+    fp = MEM.footprint(env)
+    state = fp.state
     t0 = time.perf_counter()
     e_lo, e_hi = eval_program_bytes(env, lo), eval_program_bytes(env, hi)
     (t_lo, _, _), (t_hi, cfg, trainer) = train_program_bytes(env, lo), train_program_bytes(env, hi)
     eval_slope = (e_hi - e_lo) / (hi - lo)
     train_slope = (t_hi - t_lo) / (hi - lo)
     # per env of the training batch: num_rollouts = 1, so sequences = num_envs
-    est_eval = MEM.eval_bytes(state, 1)
-    est_train = MEM.train_bytes(state, trainer.obs_size, trainer.action_size, 1, 1, cfg.unroll_length)
+    est_eval = MEM.eval_bytes(state, 1, fp.particles)
+    est_train = MEM.train_bytes(state, trainer.obs_size, trainer.action_size, 1, 1, cfg.unroll_length,
+                                particles=fp.particles)
     data = cfg.unroll_length * MEM.transition_bytes(trainer.obs_size, trainer.action_size)
     row = {
-        "task": task, "state_bytes": state, "obs_size": trainer.obs_size, "action_size": trainer.action_size,
+        "task": task, "state_bytes": state, "liquid_particles": fp.particles, "obs_size": trainer.obs_size, "action_size": trainer.action_size,
         "eval_bytes": {str(lo): e_lo, str(hi): e_hi}, "train_bytes": {str(lo): t_lo, str(hi): t_hi},
         "eval_slope_per_env": eval_slope, "train_slope_per_env": train_slope,
         "eval_factor": eval_slope / state,
@@ -101,19 +103,22 @@ def main(argv=None) -> int:
           flush=True)
   cmd = "python benchmarks/memory_estimate.py " + " ".join(sys.argv[1:] if argv is None else argv)
   result = {"command": cmd.strip(), "device": desc, "sizes": [lo, hi], "factors": {
-      "K_EVAL": MEM.K_EVAL, "K_TRAIN_STATE": MEM.K_TRAIN_STATE, "K_TRAIN_DATA": MEM.K_TRAIN_DATA}, "rows": rows}
+      "K_EVAL": MEM.K_EVAL, "K_TRAIN_STATE": MEM.K_TRAIN_STATE, "K_TRAIN_DATA": MEM.K_TRAIN_DATA,
+      "K_PAIRS": MEM.K_PAIRS}, "rows": rows}
   os.makedirs(args.results_dir, exist_ok=True)
   base = os.path.join(args.results_dir, f"memory_estimate_{slug}")
   write_json(base + ".json", result)
   lines = [f"# Memory estimate vs XLA's memory analysis ({desc})", "", f"Command: `{result['command']}`", "",
            f"Slope per env between {lo} and {hi} envs/episodes of XLA's `memory_analysis()` (arguments + outputs "
            "+ temporaries − aliased), against `train.memory`'s estimate per env "
-           f"(K_EVAL {MEM.K_EVAL:g}, K_TRAIN_STATE {MEM.K_TRAIN_STATE:g}, K_TRAIN_DATA {MEM.K_TRAIN_DATA:g}). "
+           f"(K_EVAL {MEM.K_EVAL:g}, K_TRAIN_STATE {MEM.K_TRAIN_STATE:g}, K_TRAIN_DATA {MEM.K_TRAIN_DATA:g}, "
+           f"K_PAIRS {MEM.K_PAIRS:g} for P liquid particles). "
            "Training: one seed, num_rollouts 1 (sequences = envs), unroll 10.", "",
-           "| task | state KiB | eval KiB/env (measured) | factor | estimate | bound | train KiB/env (measured) | "
-           "implied K_TRAIN_STATE | estimate | bound |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "| task | state KiB | P | eval KiB/env (measured) | factor | estimate | bound | train KiB/env (measured) | "
+           "implied K_TRAIN_STATE | estimate | bound |", "|---|---|---|---|---|---|---|---|---|---|---|"]
   for r in rows:
-    lines.append(f"| {r['task']} | {r['state_bytes'] / 1024:.1f} | {r['eval_slope_per_env'] / 1024:.1f} | "
+    lines.append(f"| {r['task']} | {r['state_bytes'] / 1024:.1f} | {r['liquid_particles']} | "
+                 f"{r['eval_slope_per_env'] / 1024:.1f} | "
                  f"{r['eval_factor']:.2f} | {r['estimate_eval_per_env'] / 1024:.1f} | {'yes' if r['eval_bound'] else '**no**'} | "
                  f"{r['train_slope_per_env'] / 1024:.1f} | {r['train_state_factor_given_data_factor']:.2f} | "
                  f"{r['estimate_train_per_env'] / 1024:.1f} | {'yes' if r['train_bound'] else '**no**'} |")

@@ -311,7 +311,8 @@ def check_memory(env, episodes: int, devices: Optional[Sequence] = None, per_epi
   per requested episode (a sweep runs every episode at each fragility level)."""
   n_dev = len(devices) if devices is not None else jax.local_device_count()
   per_device = -(-episodes * per_episode_batch // n_dev)
-  needed = MEM.eval_bytes(MEM.state_bytes(env), per_device)
+  fp = MEM.footprint(env)
+  needed = MEM.eval_bytes(fp.state, per_device, fp.particles)
   MEM.check_fits("episodes", episodes, needed, needed / episodes,
                  MEM.available_bytes() if available is None else available,
                  f"{per_device} env(s) per device")

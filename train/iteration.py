@@ -103,9 +103,8 @@ class Trainer:
     episodic = brax_training.EpisodeWrapper(env, cfg.episode_length, action_repeat=1)
     # Training: auto-resetting batch (brax's order: Episode → Vmap → AutoReset).
     self.env = brax_training.AutoResetWrapper(brax_training.VmapWrapper(episodic))
-    state_shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
-    self.env_state_bytes = MEM.tree_bytes(state_shape)  # one env's State, for the memory estimate
-    obs_shape = state_shape.obs.shape
+    self.footprint = MEM.footprint(env)  # one env's State bytes and liquid particles: the memory estimate
+    obs_shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape
     if len(obs_shape) != 1:
       raise ValueError(f"task: observations must be flat vectors, got shape {obs_shape}")
     self.obs_size, self.action_size = int(obs_shape[0]), int(env.action_size)

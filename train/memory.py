@@ -7,12 +7,17 @@ is refused with one line naming the flag and the largest value that fits.
 
 Model (bytes; ``state`` = one env's Brax ``State`` — ``mjx.Data`` with its
 contacts and constraint rows, damage state, observation — from
-``jax.eval_shape(env.reset)``, i.e. tracing only)::
+``jax.eval_shape(env.reset)``, i.e. tracing only; ``P`` = liquid particles per env)::
 
-    evaluation:  episodes × state × K_EVAL
-    training:    seeds × (num_envs × state × K_TRAIN_STATE
+    per env:     step = state × K + pairs,   pairs = P² × 4 bytes × K_PAIRS
+    evaluation:  episodes × (state × K_EVAL + pairs)
+    training:    seeds × (num_envs × (state × K_TRAIN_STATE + pairs)
                           + sequences × unroll_length × transition × K_TRAIN_DATA)
     transition = 4 bytes × (2·obs + 2·action + 8)   (obs, next obs, action, raw action, scalars)
+
+The liquid term is separate because the particle pass holds [P, P] temporaries
+(pair distances, overlaps) that dwarf the state: pour_water's 128 particles
+take 16× its state in an evaluation step.
 
 The factors cover what XLA keeps alive besides the state itself (the scan
 carry's copies, the Newton solver's and collision's temporaries, the shuffled
@@ -27,7 +32,7 @@ kept for XLA's own buffers and fragmentation.
 from __future__ import annotations
 
 import os
-from typing import Optional
+from typing import NamedTuple, Optional
 
 import jax
 import numpy as np
@@ -35,6 +40,7 @@ import numpy as np
 K_EVAL = 3.0
 K_TRAIN_STATE = 6.0
 K_TRAIN_DATA = 4.0
+K_PAIRS = 8.0  # f32 [P, P] arrays alive at once in the liquid pass
 HEADROOM = 0.85  # fraction of the free memory a batch may plan to use
 
 
@@ -43,9 +49,31 @@ def tree_bytes(tree) -> int:
   return int(sum(np.prod(x.shape, dtype=np.int64) * np.dtype(x.dtype).itemsize for x in jax.tree.leaves(tree)))
 
 
+class Footprint(NamedTuple):
+  """What one env of a task weighs: its ``State`` (bytes) and its liquid particles (0 without liquid)."""
+
+  state: int
+  particles: int
+
+
+def footprint(env) -> Footprint:
+  """:class:`Footprint` of one env (``env.reset`` traced, not compiled)."""
+  shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
+  particles = 0
+  for path, leaf in jax.tree_util.tree_flatten_with_path(shape)[0]:
+    if jax.tree_util.keystr(path).endswith("['damage_state'].liquid.pos"):
+      particles = int(leaf.shape[0])
+  return Footprint(tree_bytes(shape), particles)
+
+
 def state_bytes(env) -> int:
   """Bytes of one env's ``State`` (``env.reset`` traced, not compiled)."""
-  return tree_bytes(jax.eval_shape(env.reset, jax.random.PRNGKey(0)))
+  return footprint(env).state
+
+
+def pair_bytes(particles: int) -> int:
+  """Bytes of the liquid pass's pairwise temporaries per env."""
+  return int(4 * particles * particles * K_PAIRS)
 
 
 def transition_bytes(obs_size: int, action_size: int) -> int:
@@ -53,15 +81,15 @@ def transition_bytes(obs_size: int, action_size: int) -> int:
   return 4 * (2 * int(obs_size) + 2 * int(action_size) + 8)
 
 
-def eval_bytes(state: int, episodes: int) -> int:
+def eval_bytes(state: int, episodes: int, particles: int = 0) -> int:
   """Estimated peak bytes of evaluating ``episodes`` episodes at once (one env state ``state`` bytes)."""
-  return int(episodes * state * K_EVAL)
+  return int(episodes * (state * K_EVAL + pair_bytes(particles)))
 
 
 def train_bytes(state: int, obs_size: int, action_size: int, num_envs: int, sequences: int,
-                unroll_length: int, seeds: int = 1) -> int:
+                unroll_length: int, seeds: int = 1, particles: int = 0) -> int:
   """Estimated peak bytes of one training iteration of ``seeds`` seeds (module docstring)."""
-  per_seed = (num_envs * state * K_TRAIN_STATE
+  per_seed = (num_envs * (state * K_TRAIN_STATE + pair_bytes(particles))
               + sequences * unroll_length * transition_bytes(obs_size, action_size) * K_TRAIN_DATA)
   return int(seeds * per_seed)
 

@@ -113,9 +113,10 @@ def check_memory(trainer: Trainer, cfg: PPOConfig, available=None) -> None:
   """Refuse (``ValueError`` naming ``num_envs``) a run whose estimated peak memory does not fit the device
   (:mod:`train.memory`); checked before anything compiles."""
   sequences = cfg.minibatch_sequences * cfg.num_minibatches
-  needed = (MEM.train_bytes(trainer.env_state_bytes, trainer.obs_size, trainer.action_size, cfg.num_envs,
-                            sequences, cfg.unroll_length, cfg.num_seeds)
-            + MEM.eval_bytes(trainer.env_state_bytes, cfg.num_eval_envs))
+  fp = trainer.footprint
+  needed = (MEM.train_bytes(fp.state, trainer.obs_size, trainer.action_size, cfg.num_envs, sequences,
+                            cfg.unroll_length, cfg.num_seeds, fp.particles)
+            + MEM.eval_bytes(fp.state, cfg.num_eval_envs, fp.particles))
   MEM.check_fits("num_envs", cfg.num_envs, needed, needed / cfg.num_envs,
                  MEM.available_bytes() if available is None else available,
                  f"{cfg.num_seeds} seed(s) of training")
