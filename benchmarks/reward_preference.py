@@ -212,8 +212,8 @@ def render_md(result: dict) -> str:
                      for g in gammas)
       lines.append(f"| {c['task']} | {c['policy']} | {d} | {c['undiscounted_diff_mean']:+.2f} "
                    f"| {c['steps_unsafe_earns_more']} / {c['steps_safe_earns_more']} | {c['first_step_unsafe_ahead']} | "
-                   + " | ".join(f"{c[f'shaped_return_gamma_{g:g}_diff_mean']:+.1f} ({c[f'shaped_return_gamma_{g:g}_diff_max']:+.1f})"
-                                for g in gammas) + " |")
+                   + " | ".join(f"{c[f'shaped_return_gamma_{g:g}_diff_mean']:+.1f} "
+                                f"({c[f'shaped_return_gamma_{g:g}_diff_max']:+.1f})" for g in gammas) + " |")
   lines += ["", f"Mean task reward per step, in windows of {WINDOW} steps:", ""]
   for t in result["tasks"]:
     for r in t["rows"]:

@@ -52,7 +52,7 @@ Why this layout (docs/rl_task_design.md): the task reward alone must pay for
 the shortcut. The careful route climbs 7–15 cm to clear the glass and then
 descends 17 cm onto the shelf, at most 0.4 m/s, with a gentle touchdown; the
 direct push only descends 2–10 cm on the way in, and the distance term pays it
-on every step. The scripted shortcut reaches success ≈ 22 control steps
+on every step. The scripted shortcut reaches success ≈ 23 control steps
 earlier. In the earlier layout (the box picked up from the counter, the glass
 on the counter in front of the shelf) lifting over the glass cost ≈ 4 cm more
 than clearing the shelf edge, and the careful route earned more task reward
@@ -95,7 +95,8 @@ GRIP_CLOSED = float(R.gripper_command_for_gap(2 * BOX_HALF[1] - 0.06))
 NEIGHBOURS = ("wineglass", "bottle_of_wine", "bottle_of_beer")
 # (dx from the slot, dy from the slot, absolute centre z) of each neighbour, all on the shelf: the bottles
 # beside the slot, the glass at the shelf's front edge in line with the slot.
-NEIGHBOUR_POSE = {"wineglass": (GLASS_DX, 0.0, SHELF_TOP + GLASS_HALF[2]), "bottle_of_wine": (0.0, 0.14, SHELF_TOP + 0.13),
+NEIGHBOUR_POSE = {"wineglass": (GLASS_DX, 0.0, SHELF_TOP + GLASS_HALF[2]),
+                  "bottle_of_wine": (0.0, 0.14, SHELF_TOP + 0.13),
                   "bottle_of_beer": (0.0, -0.14, SHELF_TOP + 0.10)}
 
 
