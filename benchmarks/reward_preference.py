@@ -154,9 +154,12 @@ def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dic
          "undiscounted_diff_mean": float((e["undiscounted"] - base["undiscounted"]).mean())}
     for g in gammas:
       d = e[f"return_g{g:g}"] - base[f"return_g{g:g}"]
+      ds = e[f"shaped_g{g:g}"] - base[f"shaped_g{g:g}"]
       c[f"return_gamma_{g:g}_diff_mean"] = float(d.mean())
+      c[f"return_gamma_{g:g}_diff_min"], c[f"return_gamma_{g:g}_diff_max"] = float(d.min()), float(d.max())
       c[f"return_gamma_{g:g}_unsafe_higher_pct"] = 100 * float((d > 0).mean())
-      c[f"shaped_return_gamma_{g:g}_diff_mean"] = float((e[f"shaped_g{g:g}"] - base[f"shaped_g{g:g}"]).mean())
+      c[f"shaped_return_gamma_{g:g}_diff_mean"] = float(ds.mean())
+      c[f"shaped_return_gamma_{g:g}_diff_max"] = float(ds.max())
     cmp.append(c)
   return {"task": name, "overrides": overrides, "damage_weight": damage_weight, "styles": list(styles), "compile_s": round(compile_s, 1),
           "run_s": round(run_s, 1), "rows": rows, "comparisons": cmp,
@@ -196,18 +199,21 @@ def render_md(result: dict) -> str:
           f"| {r['task']} | {r['policy']} | {r['completion_pct']:.1f} | {r['safe_completion_pct']:.1f} | {rets} "
           f"| {_f(r['undiscounted_return'])} | {_f(ss, 'mean', '{:.1f}')} ({_f(ss, 'min', '{:.0f}')}–"
           f"{_f(ss, 'max', '{:.0f}')}) |")
-  lines += ["", "Paired differences (unsafe − safe, same episodes):", "",
+  lines += ["", "Paired differences (unsafe − safe, same episodes; mean, min–max over episodes):", "",
             "| task | policy | " + " | ".join(f"Δ return γ={g:g} (episodes unsafe higher)" for g in gammas)
             + " | Δ undiscounted | steps unsafe earns more / safe earns more | first step unsafe ahead | "
-            + " | ".join(f"Δ return γ={g:g} with damage penalty w={result['damage_weight']:g}" for g in gammas) + " |",
+            + " | ".join(f"Δ return γ={g:g} with damage penalty w={result['damage_weight']:g} (max)" for g in gammas)
+            + " |",
             "|---|---|" + "---|" * len(gammas) + "---|---|---|" + "---|" * len(gammas)]
   for t in result["tasks"]:
     for c in t["comparisons"]:
-      d = " | ".join(f"{c[f'return_gamma_{g:g}_diff_mean']:+.2f} ({c[f'return_gamma_{g:g}_unsafe_higher_pct']:.0f} %)"
+      d = " | ".join(f"{c[f'return_gamma_{g:g}_diff_mean']:+.2f}, {c[f'return_gamma_{g:g}_diff_min']:+.2f}–"
+                     f"{c[f'return_gamma_{g:g}_diff_max']:+.2f} ({c[f'return_gamma_{g:g}_unsafe_higher_pct']:.0f} %)"
                      for g in gammas)
       lines.append(f"| {c['task']} | {c['policy']} | {d} | {c['undiscounted_diff_mean']:+.2f} "
                    f"| {c['steps_unsafe_earns_more']} / {c['steps_safe_earns_more']} | {c['first_step_unsafe_ahead']} | "
-                   + " | ".join(f"{c[f'shaped_return_gamma_{g:g}_diff_mean']:+.1f}" for g in gammas) + " |")
+                   + " | ".join(f"{c[f'shaped_return_gamma_{g:g}_diff_mean']:+.1f} "
+                                f"({c[f'shaped_return_gamma_{g:g}_diff_max']:+.1f})" for g in gammas) + " |")
   lines += ["", f"Mean task reward per step, in windows of {WINDOW} steps:", ""]
   for t in result["tasks"]:
     for r in t["rows"]:

@@ -22,9 +22,14 @@ compile + final evaluation), results in $OUT, then one table::
     done
     python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid,paper}.json --tag h100
 
-Other tasks where the unsafe shortcut is tempting (issue 12 item 5), 3 seeds, one call per method::
+Other tasks where the unsafe shortcut is tempting (issue 12 item 5; docs/rl_task_design.md), one
+call per method::
 
     python benchmarks/rl_multiseed.py --task pick_egg --methods task_only --seeds 0,1,2 --tag task_only --results-dir $OUT
+    for m in task_only penalty lagrangian; do
+      python benchmarks/rl_multiseed.py --task shelve_item --methods $m --seeds 0,1,2,3,4 --budget-seconds 300 --tag $m --results-dir $OUT
+    done
+    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_shelve_item_<device>_{task_only,penalty,lagrangian}.json --tag h100
 
 CPU plumbing check (learns nothing)::
 

@@ -24,7 +24,7 @@ import tasks  # noqa: E402
 
 GAMMAS = (0.97, 0.99)
 # (task, make() overrides: the setting it is trained in)
-DESIGNED = {"place_plate": {"obs_mode": "paper"}}
+DESIGNED = {"place_plate": {"obs_mode": "paper"}, "shelve_item": {}}
 
 
 def run_policies(name, overrides, episodes, seed=0):
@@ -111,3 +111,13 @@ def test_place_plate_hand_speed_knob():
   task = env.unwrapped
   assert task.start == "in_hand" and task.hand_speed == pytest.approx(0.4)
   assert tasks.make("place_plate").unwrapped.hand_speed == 0.0  # counter start: the robot's own limit
+
+
+def test_shelve_item_hand_speed_knob():
+  """``hand_speed`` is validated before anything compiles; 0 removes the limit."""
+  for bad in (-1.0, True, "fast", 10.0):
+    with pytest.raises(ValueError, match="hand_speed"):
+      tasks.make("shelve_item", hand_speed=bad)
+  assert tasks.default_config("shelve_item")["hand_speed"] == pytest.approx(0.4)
+  assert tasks.make("shelve_item").unwrapped._speed_scale == pytest.approx(0.4 * 0.024 / 0.02)
+  assert tasks.make("shelve_item", hand_speed=0.0).unwrapped._speed_scale == 1.0
