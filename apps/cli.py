@@ -37,6 +37,7 @@ SUBCOMMANDS = {
     "bench": ("apps.bench.cli", "throughput benchmark (JSON + PNG)"),
     "render": ("apps.render_cli", "render a rollout with damage tint and health bars"),
     "record": ("apps.record_cli", "record N episodes of a policy or operator as an HDF5 dataset"),
+    "view": ("apps.view_cli", "interactive viewer: live health bars and tint, teleoperation, --record"),
 }
 INTERRUPTED = 130
 KEPT = "files written so far are kept, each one complete (atomic writes); nothing else was written"
