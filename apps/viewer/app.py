@@ -9,9 +9,11 @@ Each control step (one ``env.dt``, e.g. 24 ms):
 3. :func:`apps.viewer.native_env.step` advances the ``MjData`` the viewer shows
    (the task's own step, native physics, temperature, liquid and damage at
    every substep), under the viewer's lock;
-4. feedback (:mod:`apps.viewer.feedback`): geom colours by health, the health
-   panel (bars, values, episode cost, damage per model of the last second), the
-   liquid, the heat-source glow; then ``viewer.sync()``;
+4. feedback (:mod:`apps.viewer.feedback`): geom colours by health, the
+   liquid, the heat-source glow; then ``viewer.sync()``; the one overlay, the
+   health panel (bars, values, episode cost, damage per model of the last
+   second; status lines under it; status only with feedback off) is drawn and
+   handed to the viewer on a thread of its own (:func:`_panel_worker`);
 5. with ``record``, the step joins the episode's rows; an episode ends after
    ``episode_length`` steps or on Enter and is appended to the dataset file;
 6. the loop sleeps until wall clock = simulated time / speed (slow motion:
@@ -27,6 +29,7 @@ tests and the benchmark.
 from __future__ import annotations
 
 import collections
+import os
 import queue
 import threading
 import time
@@ -48,25 +51,23 @@ LATE_S = 0.25  # a step this far behind the wall clock restarts the clock instea
 
 
 def _status(mode: str, paused: bool, speed: float, ep: int, t: int, length: int, record: Optional[str],
-            recorded: int, feedback: bool) -> list:
-  left = ["mode", "episode", "speed", "damage feedback"]
-  right = [mode + ("   [PAUSED: Space]" if paused else ""), f"{ep}  (step {t} / {length})",
-           f"{speed:g}x real time  (- / =)", "on" if feedback else "off (--no-feedback)"]
+            recorded: int) -> list:
+  """Status lines under the damage panel."""
+  lines = [f"{mode}{'   PAUSED (Space)' if paused else ''}",
+           f"episode {ep}, step {t} / {length}   speed {speed:g}x real time (- / =)"]
   if record:
-    left.append("recording")
-    right.append(f"{record}  ({recorded} episodes in the file)")
-  return [(mujoco.mjtFontScale.mjFONTSCALE_150, mujoco.mjtGridPos.mjGRID_BOTTOMLEFT, "\n".join(left),
-           "\n".join(right))]
+    lines.append(f"recording: {os.path.basename(record)} ({recorded} episodes in the file)")
+  return lines
 
 
-def _panel_worker(viewer, sc: F.Scene, drawn: list):
+def _panel_worker(viewer, sc: F.Scene, feedback: bool, drawn: list):
   """Draw the health panel and hand it to the viewer on a thread of its own.
 
-  ``Handle.set_images`` returns only after the viewer's render thread took the
-  image (one rendered frame), so the control loop posts the latest numbers and
+  ``Handle.set_images`` (as ``set_texts``) returns only after the viewer's
+  render thread took the image (one rendered frame: 10-200 ms in software GL), so the control loop posts the latest numbers and
   never waits for a frame; a panel not yet drawn when newer numbers arrive is
   dropped (the screen shows every frame the newest state). Returns ``post(frame,
-  recent)``, ``flush()`` (wait until the last posted panel is on screen) and ``stop()``.
+  recent, status)``, ``flush()`` (wait until the last posted panel is on screen) and ``stop()``.
   """
   latest: queue.Queue = queue.Queue(maxsize=1)
   stop = threading.Event()
@@ -74,10 +75,10 @@ def _panel_worker(viewer, sc: F.Scene, drawn: list):
   def loop():
     while not stop.is_set():
       try:
-        fr, recent = latest.get(timeout=0.05)
+        fr, recent, status = latest.get(timeout=0.05)
       except queue.Empty:
         continue
-      img = F.panel(sc, fr, recent)
+      img = F.panel(sc, fr, recent, status, feedback)
       drawn[:] = [drawn[0] if drawn else img, img]
       vp = viewer.viewport
       top = vp.height if vp is not None and vp.height > 0 else img.shape[0]
@@ -87,19 +88,27 @@ def _panel_worker(viewer, sc: F.Scene, drawn: list):
   worker = threading.Thread(target=loop, name="mjx-damage-panel", daemon=True)
   worker.start()
 
-  def post(fr, recent):
+  def post(fr, recent, status):
     try:  # only this thread puts: after dropping a stale panel there is room
       latest.get_nowait()
       latest.task_done()
     except queue.Empty:
       pass
-    latest.put_nowait((fr, recent))
+    latest.put_nowait((fr, recent, status))
 
   def halt():
     stop.set()
     worker.join(timeout=5.0)
 
   return post, latest.join, halt
+
+
+def _window(img: np.ndarray, viewer) -> np.ndarray:
+  """The viewer window's part of a screenshot (no window manager: the window sits at the screen's origin)."""
+  vp = viewer.viewport
+  if vp is None or vp.width <= 0 or vp.height <= 0:
+    return img
+  return img[: vp.height, : vp.width]
 
 
 def _frame_camera(cam: mujoco.MjvCamera, nat: N.NativeEnv, data: mujoco.MjData, sc: F.Scene) -> None:
@@ -151,7 +160,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
   viewer = mujoco.viewer.launch_passive(nat.model, data, key_callback=events.put, show_left_ui=False,
                                         show_right_ui=False)
   panels: list = []  # [first, last] panel images drawn
-  post_panel, flush_panel, stop_panel = _panel_worker(viewer, sc, panels)
+  post_panel, flush_panel, stop_panel = _panel_worker(viewer, sc, feedback, panels)
   _frame_camera(viewer.cam, nat, data, sc)
   clock_wall, clock_sim = time.perf_counter(), 0.0
   t_start = clock_wall
@@ -161,15 +170,14 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
     if screen is not None and k in shots:
       flush_panel()
       time.sleep(0.5)  # the viewer's render thread draws the last sync
-      taken[k] = X.screenshot(screen)
+      taken[k] = _window(X.screenshot(screen), viewer)
 
   def show(fr):
     with viewer.lock():
       nat.model.geom_rgba[:] = F.colours(sc, fr, feedback)
       F.add_particles(viewer.user_scn, sc, fr)
-    if feedback:
-      post_panel(fr, np.sum(np.asarray(recent), axis=0) if recent else np.zeros(3, np.float32))
-    viewer.set_texts(_status(mode, paused, speed, ep, t, episode_length, record, recorded, feedback))
+    post_panel(fr, np.sum(np.asarray(recent), axis=0) if recent else np.zeros(3, np.float32),
+               _status(mode, paused, speed, ep, t, episode_length, record, recorded))
     viewer.sync()
 
   def save_episode():
@@ -244,7 +252,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
     if screen is not None:
       flush_panel()
       time.sleep(0.5)  # the viewer's render thread draws the last sync
-      shot = X.screenshot(screen)
+      shot = _window(X.screenshot(screen), viewer)
   finally:
     wall = time.perf_counter() - t_start if shot is None else wall
     stop_panel()

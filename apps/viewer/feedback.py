@@ -102,27 +102,32 @@ def _per_entity(values: np.ndarray, link_entity: np.ndarray, n: int, reduce) -> 
   return [float(reduce(values[link_entity == i])) if np.any(link_entity == i) else float("nan") for i in range(n)]
 
 
-def panel(sc: Scene, fr: Frame, recent: np.ndarray) -> np.ndarray:
-  """uint8[h, PANEL_WIDTH, 3]: a health bar, the value and readouts per entity, then the episode cost,
-  the damage per model of the last second (``recent`` f32[3], health points) and the heat sources."""
-  n = len(sc.entity_names)
+def panel(sc: Scene, fr: Frame, recent: np.ndarray, status=(), feedback: bool = True) -> np.ndarray:
+  """uint8[h, PANEL_WIDTH, 3], the viewer's one overlay: with ``feedback``, a health bar, the value
+  and readouts per entity, the episode cost, the damage per model of the last second (``recent``
+  f32[3], health points) and the heat sources; then the ``status`` lines (mode, speed, recording).
+  Without ``feedback`` only the status lines."""
+  n = len(sc.entity_names) if feedback else 0
+  names, health = (sc.entity_names, fr.entity_health) if feedback else ((), ())
   headers, columns = [], []
-  if sc.source_geom is not None:
+  if feedback and sc.source_geom is not None:
     headers.append("max °C")
     columns.append([f"{x:.0f}" for x in _per_entity(fr.temperature, sc.link_entity, n, np.max)])
-  if sc.particle_radius is not None:
+  if feedback and sc.particle_radius is not None:
     headers.append("wet (particles)")
     columns.append([f"{x:.0f}" for x in _per_entity(fr.exposure, sc.link_entity, n, np.sum)])
   readouts = [tuple(c[i] for c in columns) for i in range(n)] if columns else None
-  caption = [f"t {fr.time:5.2f} s   episode damage {fr.episode_cost:.1f} hp",
-             "last 1 s: " + ", ".join(f"{m} {v:.1f}" for m, v in zip(MODELS, recent)) + " hp"]
-  if fr.sources is not None and len(sc.source_names):
-    caption.append("heat source: " + ", ".join(f"{s} {t:.0f} °C" for s, t in zip(sc.source_names, fr.sources)))
+  caption = []
+  if feedback:
+    caption = [f"t {fr.time:5.2f} s   episode damage {fr.episode_cost:.1f} hp",
+               "last 1 s: " + ", ".join(f"{m} {v:.1f}" for m, v in zip(MODELS, recent)) + " hp"]
+    if fr.sources is not None and len(sc.source_names):
+      caption.append("heat source: " + ", ".join(f"{s} {t:.0f} °C" for s, t in zip(sc.source_names, fr.sources)))
+  caption += list(status)
   H = 22 * PANEL_ROW
-  img = overlay.draw_health_bars(np.zeros((H, PANEL_WIDTH, 3), np.uint8), sc.entity_names, fr.entity_health,
-                                 caption, readouts, headers)
-  top = overlay.bar_layout(H, PANEL_WIDTH, sc.entity_names, readouts, headers)[5][3]
-  cap = overlay.caption_box(H, PANEL_WIDTH, sc.entity_names, caption)[1]
+  img = overlay.draw_health_bars(np.zeros((H, PANEL_WIDTH, 3), np.uint8), names, health, caption, readouts, headers)
+  top = overlay.bar_layout(H, PANEL_WIDTH, names, readouts, headers)[5][3] if feedback else 0
+  cap = overlay.caption_box(H, PANEL_WIDTH, names, caption)[1]
   return np.ascontiguousarray(np.concatenate([img[:top], img[cap:]]))  # drop the empty rows between
 
 
