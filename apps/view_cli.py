@@ -37,7 +37,8 @@ TELEOP_EPISODE_S = 60.0  # s of simulated time per teleoperated episode unless -
 
 
 def build_parser() -> Parser:
-  ap = Parser(prog="mjx-damage view", description=__doc__.split("\n\n")[0] + "\n\nkeys (teleoperation and viewer):\n"
+  ap = Parser(prog="mjx-damage view", description="MuJoCo's interactive viewer on a task (native MuJoCo): live "
+              "health bars and damage tint, teleoperation, recording.\n\n" + __doc__.split("\n\n")[2] + "\n\nkeys (teleoperation and viewer):\n"
               + K.help_text() + "\n\nMuJoCo's own viewer keys (mouse: rotate/zoom/pan; Ctrl + drag: push a "
               "body; letters toggle display flags) keep working.")
   ap.add_argument("--task", required=True, help=f"task name (registry tasks, or built-in: {', '.join(R.BUILTIN_TASKS)})")

@@ -21,8 +21,8 @@ Each control step (one ``env.dt``, e.g. 24 ms):
    clock restarts from it (so a pause or a stall never turns into a fast-forward).
 
 ``run`` returns what happened (steps, episodes, wall and simulated time, the
-wall time of each control step from action to ``sync`` (pacing sleeps
-excluded), the first and last panel, the screenshot) for the command line, the
+wall and CPU time (this thread's) of each control step from action to
+``sync`` (pacing sleeps excluded), the first and last panel, the screenshot) for the command line, the
 tests and the benchmark.
 """
 
@@ -164,7 +164,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
   _frame_camera(viewer.cam, nat, data, sc)
   clock_wall, clock_sim = time.perf_counter(), 0.0
   t_start = clock_wall
-  shot, step_s, taken = None, [], {}
+  shot, step_s, step_cpu_s, taken = None, [], [], {}
 
   def take(k):
     if screen is not None and k in shots:
@@ -224,7 +224,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
         action = np.asarray(act(state, jax.random.fold_in(jax.random.fold_in(rng, ep), t)))
       else:
         action = teleop.action
-      t_step = time.perf_counter()
+      t_step, c_step = time.perf_counter(), time.thread_time()
       obs, qpos, qvel = np.asarray(state.obs), data.qpos.copy(), data.qvel.copy()
       with viewer.lock():
         nxt = N.step(nat, data, state, action)
@@ -235,6 +235,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
       recent.append(fr.damage)
       show(fr)
       step_s.append(time.perf_counter() - t_step)
+      step_cpu_s.append(time.thread_time() - c_step)
       take(total)
       if t >= episode_length or (steps is not None and total >= steps):
         save_episode()
@@ -261,5 +262,5 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
   return {"steps": total, "episodes": ep + (t > 0), "wall_s": wall, "sim_s": total * nat.dt, "recorded": recorded,
           "first_panel": panels[0] if panels else None,
           "last_panel": panels[-1] if panels else None, "screenshot": shot, "shots": taken, "scene": sc,
-          "step_s": step_s,
+          "step_s": step_s, "step_cpu_s": step_cpu_s,
           "final_health": dict(zip(env.entity_names, np.asarray(state.info["entity_health"]).tolist()))}
