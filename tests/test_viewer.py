@@ -10,6 +10,9 @@ plate lies. It is skipped, saying why, where the ``Xvfb`` binary is missing
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import threading
 
 import numpy as np
 import pytest
@@ -164,3 +167,30 @@ def test_viewer_recording_loads_back(viewed):
   np.testing.assert_allclose(ds.health["plate"][0, -1], res["final_health"]["plate"], atol=1e-4)
   assert ds.damage["mechanical"][0].sum() > 50.0 and EP.feedback_flags(path) == {0: True}
   assert ds.label_names == ("scripted:unsafe",)
+
+
+def test_keyboard_teleoperation_moves_the_hand(tmp_path):
+  """Real key presses (xdotool → X server → GLFW → the viewer's key callback) drive the 4-D action."""
+  if X.xvfb_path() is None or shutil.which("xdotool") is None:
+    pytest.skip("needs Xvfb and xdotool (Debian packages xvfb, xdotool)")
+  from apps.viewer import app  # noqa: PLC0415
+
+  env = tasks.make(TASK)
+  path = str(tmp_path / "teleop.hdf5")
+  result = {}
+  with X.virtual_display() as screen:
+    run = threading.Thread(target=lambda: result.update(app.run(
+        env, TASK, record=path, episode_length=150, steps=150, realtime=True, plain=True, log=lambda m: None)))
+    run.start()
+    env_x = dict(os.environ, DISPLAY=screen.name)
+    win = subprocess.run(["xdotool", "search", "--sync", "--name", "MuJoCo"], env=env_x, capture_output=True,
+                         text=True, timeout=120).stdout.split()[0]
+    for key in ("Up", "Up", "Prior"):  # full speed +x, half speed +z
+      subprocess.run(["xdotool", "key", "--window", win, key], env=env_x, check=True, timeout=30)
+    run.join(timeout=300)
+  assert not run.is_alive() and result["steps"] == 150
+  ds = D.load(path, task=TASK)
+  states, actions = ds.states[0], ds.actions[0]
+  assert actions[-1, 0] == 1.0 and actions[-1, 2] == 0.5 and actions[-1, 1] == 0.0  # the latched command
+  assert states[-1, 0] - states[0, 0] > 0.1 and states[-1, 2] > states[0, 2]  # the hand went +x and up
+  assert EP.feedback_flags(path) == {0: True} and ds.label_names == ("teleop",)

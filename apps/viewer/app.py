@@ -121,12 +121,14 @@ def _frame_camera(cam: mujoco.MjvCamera, nat: N.NativeEnv, data: mujoco.MjData, 
   cam.distance, cam.azimuth, cam.elevation = framed.distance, framed.azimuth, framed.elevation
 
 
-def initial_grip(env, state) -> float:
-  """The gripper command the task starts with: its scripted safe policy's first action (0 without one)."""
+def initial_grip(env) -> Callable:
+  """``grip(state) -> float``: the gripper command the task starts with, its scripted safe policy's
+  first action (0 for an env without one), compiled once."""
   task = env.unwrapped
   if env.action_size == 0 or not hasattr(task, "policy"):
-    return 0.0
-  return float(np.asarray(jax.jit(task.policy("safe"))(state, jax.random.PRNGKey(0)))[-1])
+    return lambda state: 0.0
+  safe = jax.jit(task.policy("safe"))
+  return lambda state: float(np.asarray(safe(state, jax.random.PRNGKey(0)))[-1])
 
 
 def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = True, record: Optional[str] = None,
@@ -152,9 +154,10 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
   recorded = EP.check_target(record, task) if record else 0
   safe_threshold = float(getattr(env, "safe_threshold", 95.0))
 
+  grip = initial_grip(env) if policy is None else (lambda state: 0.0)
   ep, t, total = 0, 0, 0
   state = N.reset(nat, data, jax.random.fold_in(rng, ep))
-  teleop = K.start(env.action_size, initial_grip(env, state))
+  teleop = K.start(env.action_size, grip(state))
   rows, recent = [], collections.deque(maxlen=sc.window)
   paused = False
   viewer = mujoco.viewer.launch_passive(nat.model, data, key_callback=events.put, show_left_ui=False,
@@ -195,7 +198,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
     recent.clear()
     with viewer.lock():
       state = N.reset(nat, data, jax.random.fold_in(rng, ep))
-    teleop = K.start(env.action_size, initial_grip(env, state))
+    teleop = K.start(env.action_size, grip(state))
     clock_wall, clock_sim = time.perf_counter(), 0.0
 
   show(F.frame(state, sc.ambient))
