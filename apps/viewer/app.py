@@ -47,6 +47,7 @@ from apps.viewer import keys as K
 from apps.viewer import native_env as N
 from mjx_damage import render
 
+SETTLE_S = 2.0  # s a screenshot waits at most for two equal reads of the screen
 LATE_S = 0.25  # a step this far behind the wall clock restarts the clock instead of catching up
 
 
@@ -67,7 +68,8 @@ def _panel_worker(viewer, sc: F.Scene, feedback: bool, drawn: list):
   render thread took the image (one rendered frame: 10-200 ms in software GL), so the control loop posts the latest numbers and
   never waits for a frame; a panel not yet drawn when newer numbers arrive is
   dropped (the screen shows every frame the newest state). Returns ``post(frame,
-  recent, status)``, ``flush()`` (wait until the last posted panel is on screen) and ``stop()``.
+  recent, status)``, ``flush()`` (wait until the frame showing the last posted state is on
+  screen) and ``stop()``.
   """
   latest: queue.Queue = queue.Queue(maxsize=1)
   stop = threading.Event()
@@ -88,7 +90,10 @@ def _panel_worker(viewer, sc: F.Scene, feedback: bool, drawn: list):
   worker = threading.Thread(target=loop, name="mjx-damage-panel", daemon=True)
   worker.start()
 
+  last = []
+
   def post(fr, recent, status):
+    last[:] = [(fr, recent, status)]
     try:  # only this thread puts: after dropping a stale panel there is room
       latest.get_nowait()
       latest.task_done()
@@ -100,7 +105,15 @@ def _panel_worker(viewer, sc: F.Scene, feedback: bool, drawn: list):
     stop.set()
     worker.join(timeout=5.0)
 
-  return post, latest.join, halt
+  def flush():
+    # the last panel taken starts a frame; taking it once more starts the next, so the frame
+    # showing the last posted state (scene and panel) is on screen when this returns
+    latest.join()
+    if last:
+      post(*last[0])
+      latest.join()
+
+  return post, flush, halt
 
 
 def _window(img: np.ndarray, viewer) -> np.ndarray:
@@ -172,8 +185,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
   def take(k):
     if screen is not None and k in shots:
       flush_panel()
-      time.sleep(0.5)  # the viewer's render thread draws the last sync
-      taken[k] = _window(X.screenshot(screen), viewer)
+      taken[k] = _window(X.screenshot(screen, settle_s=SETTLE_S), viewer)
 
   def show(fr):
     with viewer.lock():
@@ -255,8 +267,7 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
     wall = time.perf_counter() - t_start
     if screen is not None:
       flush_panel()
-      time.sleep(0.5)  # the viewer's render thread draws the last sync
-      shot = _window(X.screenshot(screen), viewer)
+      shot = _window(X.screenshot(screen, settle_s=SETTLE_S), viewer)
   finally:
     wall = time.perf_counter() - t_start if shot is None else wall
     stop_panel()

@@ -11,6 +11,7 @@ with no GL read-back.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import shutil
@@ -19,7 +20,6 @@ import tempfile
 import time
 from typing import Iterator, NamedTuple
 
-import glfw
 import numpy as np
 
 XVFB = "Xvfb"
@@ -45,41 +45,68 @@ def _free_display() -> int:
   raise RuntimeError("no free X display number in :90..:399")
 
 
-@contextlib.contextmanager
-def virtual_display(width: int = 1280, height: int = 800) -> Iterator[Display]:
-  """Run the block with ``DISPLAY`` set to a fresh Xvfb screen of ``width`` × ``height`` (24-bit)."""
+# GLFW connects to one display per process, when it is first initialised, and keeps that
+# connection until interpreter exit (terminating and re-initialising it under a viewer whose
+# thread is still alive aborts the process). So a process gets ONE private screen: started by
+# the first virtual_display, reused by later ones, stopped at exit after GLFW let it go.
+_screen: list = []  # [(Display, Popen)] once started
+
+
+def _stop(proc: subprocess.Popen, fbdir: str) -> None:
+  proc.terminate()
+  try:
+    proc.wait(timeout=5)
+  except subprocess.TimeoutExpired:
+    proc.kill()
+    proc.wait()
+  shutil.rmtree(fbdir, ignore_errors=True)
+
+
+def _start(width: int, height: int) -> Display:
   exe = xvfb_path()
   if exe is None:
     raise RuntimeError("the viewer without a screen needs Xvfb (apt-get install xvfb; `make install` does "
                        "this as root)")
   fbdir = tempfile.mkdtemp(prefix="mjx-damage-xvfb-")
   n = _free_display()
+  # -terminate: the server also goes when its last client does (a process killed before its exit
+  # handlers run leaves no Xvfb behind once GLFW's connection has closed)
   proc = subprocess.Popen([exe, f":{n}", "-screen", "0", f"{width}x{height}x24", "-fbdir", fbdir, "-nolisten",
-                           "tcp"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                           "tcp", "-terminate"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+  deadline = time.monotonic() + 10.0
+  while not os.path.exists(f"/tmp/.X11-unix/X{n}") or not os.path.exists(os.path.join(fbdir, "Xvfb_screen0")):
+    if proc.poll() is not None or time.monotonic() > deadline:
+      _stop(proc, fbdir)
+      raise RuntimeError(f"Xvfb :{n} did not start (exit status {proc.poll()})")
+    time.sleep(0.05)
+  # registered before GLFW registers its own glfw.terminate (at the first viewer): exit handlers
+  # run last-in first-out, so GLFW closes its connection before the server stops
+  atexit.register(_stop, proc, fbdir)
+  display = Display(f":{n}", fbdir, width, height)
+  _screen.append((display, proc))
+  return display
+
+
+@contextlib.contextmanager
+def virtual_display(width: int = 1280, height: int = 800) -> Iterator[Display]:
+  """Run the block with ``DISPLAY`` set to this process's private Xvfb screen (24-bit), started on
+  first use with ``width`` × ``height`` and stopped at interpreter exit."""
+  if _screen:
+    display = _screen[0][0]
+    if (display.width, display.height) != (width, height):
+      raise ValueError(f"virtual_display: this process's screen is {display.width}x{display.height}, "
+                       f"got {width}x{height} (one screen per process)")
+  else:
+    display = _start(width, height)
   old = os.environ.get("DISPLAY")
+  os.environ["DISPLAY"] = display.name
   try:
-    deadline = time.monotonic() + 10.0
-    while not os.path.exists(f"/tmp/.X11-unix/X{n}") or not os.path.exists(os.path.join(fbdir, "Xvfb_screen0")):
-      if proc.poll() is not None or time.monotonic() > deadline:
-        raise RuntimeError(f"Xvfb :{n} did not start (exit status {proc.poll()})")
-      time.sleep(0.05)
-    os.environ["DISPLAY"] = f":{n}"
-    yield Display(f":{n}", fbdir, width, height)
+    yield display
   finally:
-    # GLFW keeps its connection to the display after the viewer closes and would meet a dead
-    # server at interpreter exit (Xlib then ends the process with status 1): close it first.
-    glfw.terminate()
     if old is None:
       os.environ.pop("DISPLAY", None)
     else:
       os.environ["DISPLAY"] = old
-    proc.terminate()
-    try:
-      proc.wait(timeout=5)
-    except subprocess.TimeoutExpired:
-      proc.kill()
-      proc.wait()
-    shutil.rmtree(fbdir, ignore_errors=True)
 
 
 def read_xwd(raw: bytes) -> np.ndarray:
@@ -106,7 +133,21 @@ def read_xwd(raw: bytes) -> np.ndarray:
   return out
 
 
-def screenshot(display: Display) -> np.ndarray:
-  """uint8[H, W, 3]: the whole screen of ``display`` now."""
-  with open(os.path.join(display.fbdir, "Xvfb_screen0"), "rb") as f:
-    return read_xwd(f.read())
+def screenshot(display: Display, settle_s: float = 0.0) -> np.ndarray:
+  """uint8[H, W, 3]: the whole screen of ``display``. With ``settle_s`` > 0, the first screen
+  that equals the one 0.25 s before (the last frame asked for is drawn: a software renderer on a
+  busy CPU can take longer than a fixed wait), or the last one read after ``settle_s``."""
+
+  def read():
+    with open(os.path.join(display.fbdir, "Xvfb_screen0"), "rb") as f:
+      return read_xwd(f.read())
+
+  img = read()
+  deadline = time.monotonic() + settle_s
+  while time.monotonic() < deadline:
+    time.sleep(0.25)
+    nxt = read()
+    if np.array_equal(nxt, img):
+      break
+    img = nxt
+  return img
