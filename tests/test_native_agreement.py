@@ -99,3 +99,22 @@ def test_native_damage_substep_is_compiled_once_per_scene(rollouts):
   nat = N.make(env)
   assert native.damage_substep_fn(task.damage_binding, nat.model) is native.damage_substep_fn(
       task.damage_binding, nat.model)
+
+
+def test_native_step_is_mujocos_own_step(rollouts):
+  """The damage evaluation between MuJoCo's stages changes nothing of the physics: ``native.step``
+  moves an ``MjData`` bit for bit as ``mujoco.mj_step`` does (so a gap to MJX is MJX's physics)."""
+  _, env, *_ = rollouts
+  nat = N.make(env)
+  a, b = mujoco.MjData(nat.model), mujoco.MjData(nat.model)
+  state = N.reset(nat, a, jax.random.PRNGKey(1))
+  for name in ("qpos", "qvel", "act", "ctrl", "mocap_pos", "mocap_quat", "qacc_warmstart"):
+    getattr(b, name)[:] = getattr(a, name)
+  ds, rng = state.info["damage_state"], np.random.default_rng(0)
+  for _ in range(10):
+    a.ctrl[:] = b.ctrl[:] = a.ctrl + rng.uniform(-0.05, 0.05, nat.model.nu)
+    ds = native.step(nat.binding, nat.model, a, ds, nat.n_substeps)
+    for _ in range(nat.n_substeps):
+      mujoco.mj_step(nat.model, b)
+  np.testing.assert_array_equal(a.qpos, b.qpos)
+  np.testing.assert_array_equal(a.qvel, b.qvel)
