@@ -20,6 +20,10 @@ Each control step (one ``env.dt``, e.g. 24 ms):
    speed < 1). A step that falls behind does not make the next ones hurry: the
    clock restarts from it (so a pause or a stall never turns into a fast-forward).
 
+The viewer's render thread runs at a lower priority (nice +10): where the CPU
+is short (software OpenGL under Xvfb draws as fast as it can), frames drop
+before control steps slow.
+
 ``run`` returns what happened (steps, episodes, wall and simulated time, the
 wall and CPU time (this thread's) of each control step from action to
 ``sync`` (pacing sleeps excluded), the first and last panel, the screenshot) for the command line, the
@@ -116,6 +120,21 @@ def _panel_worker(viewer, sc: F.Scene, feedback: bool, drawn: list):
   return post, flush, halt
 
 
+RENDER_NICE = 10  # niceness of the viewer's render thread: frames drop before control steps slow
+
+
+def _yield_to_simulation(threads) -> None:
+  """Lower the viewer's render thread(s) to nice ``RENDER_NICE`` (Linux: per-thread priority).
+
+  Under Xvfb the software renderer draws as fast as it can; on a busy CPU it would take time
+  from the control loop, which must keep real time, while a dropped frame costs nothing."""
+  for th in threads:
+    try:
+      os.setpriority(os.PRIO_PROCESS, th.native_id, RENDER_NICE)
+    except (AttributeError, OSError, TypeError):  # not Linux, or not permitted: keep the default
+      pass
+
+
 def _window(img: np.ndarray, viewer) -> np.ndarray:
   """The viewer window's part of a screenshot (no window manager: the window sits at the screen's origin)."""
   vp = viewer.viewport
@@ -173,8 +192,10 @@ def run(env, task: str, *, policy: Optional[Callable] = None, feedback: bool = T
   teleop = K.start(env.action_size, grip(state))
   rows, recent = [], collections.deque(maxlen=sc.window)
   paused = False
+  before = set(threading.enumerate())
   viewer = mujoco.viewer.launch_passive(nat.model, data, key_callback=events.put, show_left_ui=False,
                                         show_right_ui=False)
+  _yield_to_simulation(set(threading.enumerate()) - before)
   panels: list = []  # [first, last] panel images drawn
   post_panel, flush_panel, stop_panel = _panel_worker(viewer, sc, feedback, panels)
   _frame_camera(viewer.cam, nat, data, sc)
