@@ -5,9 +5,11 @@ PY     := $(VENV)/bin/python
 export MPLBACKEND ?= Agg
 
 # Headless rendering (mjx-damage render, tests/test_render.py) uses MuJoCo's OSMesa
-# backend: software OpenGL from Debian's libosmesa6. Installed here when missing and
-# when we can (root with apt-get, as on CI); otherwise a note says what to install.
-SYSTEM_PACKAGES := libosmesa6
+# backend: software OpenGL from Debian's libosmesa6. The interactive viewer without a
+# screen (mjx-damage view --headless, tests/test_viewer.py) runs on Xvfb (Debian's xvfb).
+# Installed here when missing and when we can (root with apt-get, as on CI); otherwise
+# a note says what to install (tests/test_viewer.py then skips its viewer tests, saying why).
+SYSTEM_PACKAGES := libosmesa6 xvfb
 
 .PHONY: demo test test-slow bench install clean system-deps
 
@@ -24,7 +26,7 @@ system-deps:
 	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
 	  echo "installing system packages:$$missing"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
-	else echo "note: headless rendering needs:$$missing (sudo apt-get install$$missing)"; fi
+	else echo "note: headless rendering / the viewer without a screen need:$$missing (sudo apt-get install$$missing)"; fi
 
 install: system-deps $(VENV)/.installed
 

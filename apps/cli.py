@@ -39,6 +39,7 @@ SUBCOMMANDS = {
     "record": ("apps.record_cli", "record N episodes of a policy or operator as an HDF5 dataset"),
     "bc": ("apps.bc_cli", "behaviour cloning of a dataset into a PPO actor (fine-tune with train --init-from)"),
     "tasks": ("apps.tasks_cli", "list the tasks: damage modality, entities, unsafe shortcut, safe strategy"),
+    "view": ("apps.view_cli", "interactive viewer: live health bars and tint, teleoperation, --record"),
 }
 INTERRUPTED = 130
 KEPT = "files written so far are kept, each one complete (atomic writes); nothing else was written"
