@@ -9,7 +9,7 @@ export MPLBACKEND ?= Agg
 # screen (mjx-damage view --headless, tests/test_viewer.py) runs on Xvfb (Debian's xvfb).
 # Installed here when missing and when we can (root with apt-get, as on CI); otherwise
 # a note says what to install (tests/test_viewer.py then skips its viewer tests, saying why).
-SYSTEM_PACKAGES := libosmesa6 xvfb
+SYSTEM_PACKAGES := libosmesa6 xvfb xdotool
 
 .PHONY: demo test test-slow bench install clean system-deps
 
