@@ -77,7 +77,7 @@ class TurnOnMicrowave(Task):
 
   def sample_init(self, rng, qpos):
     eef = jax.random.uniform(rng, (3,), minval=jnp.array([-0.15, 0.0, 0.1]), maxval=jnp.array([-0.05, 0.25, 0.2]))
-    return self.robot.home(qpos, eef, R.Q_MIN), {}
+    return self.robot.home(qpos, eef, self.robot.finger_ctrl(-1.0)[0]), {}
 
   def task_obs(self, d, info):
     q = self.depth(d)
