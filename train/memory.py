@@ -36,6 +36,7 @@ from typing import NamedTuple, Optional
 
 import jax
 import numpy as np
+from mujoco import mjx
 
 K_EVAL = 3.0
 K_TRAIN_STATE = 6.0
@@ -56,8 +57,26 @@ class Footprint(NamedTuple):
   particles: int
 
 
+STATE_EXTRA = 4096  # bytes: observation, metrics and info scalars of a State besides data and damage state
+
+
 def footprint(env) -> Footprint:
-  """:class:`Footprint` of one env (``env.reset`` traced, not compiled)."""
+  """:class:`Footprint` of one env, traced, never compiled.
+
+  A damage env (``sys`` + ``init_damage``): ``mjx.Data`` shapes (``make_data``, which
+  ``reset`` returns with the same shapes) + the damage state twice (the wrapper keeps
+  the episode's initial one too) + :data:`STATE_EXTRA`. Tracing ``reset`` itself runs
+  the whole forward pass in Python (seconds on a busy CPU; tens with liquid), and a warm
+  command that loads its traced program should not pay that for an estimate. Any
+  other env: ``jax.eval_shape(env.reset)``.
+  """
+  base = getattr(env, "unwrapped", env)
+  if hasattr(base, "sys") and hasattr(base, "init_damage"):
+    data = jax.eval_shape(lambda: mjx.make_data(base.sys))
+    ds = jax.eval_shape(base.init_damage, jax.random.PRNGKey(0))
+    liquid = getattr(ds, "liquid", None)
+    particles = 0 if liquid is None else int(liquid.pos.shape[0])
+    return Footprint(tree_bytes(data) + 2 * tree_bytes(ds) + STATE_EXTRA, particles)
   shape = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
   particles = 0
   for path, leaf in jax.tree_util.tree_flatten_with_path(shape)[0]:
