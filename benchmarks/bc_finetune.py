@@ -54,7 +54,7 @@ from train.record import record  # noqa: E402
 
 FULL = dict(demos=25, seeds=3, bc_steps=4000, eval_episodes=256, num_envs=2048, timesteps=20_000_000,
             warmup=10, damage_weight=2.0, chunk=64)
-QUICK = dict(demos=6, seeds=2, bc_steps=300, eval_episodes=16, num_envs=32, timesteps=32 * 10 * 6,
+QUICK = dict(demos=24, seeds=2, bc_steps=2000, eval_episodes=32, num_envs=32, timesteps=32 * 10 * 6,
              warmup=2, damage_weight=2.0, chunk=12)
 
 
