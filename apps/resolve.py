@@ -15,6 +15,7 @@ import os
 from typing import Optional
 
 import tasks
+import tasks.native
 import train
 from mjx_damage.wrapper import DamageWrapper
 from tasks.bench_table import table_env
@@ -22,6 +23,7 @@ from tasks.drop import DropEnv
 from train import checkpoint as ckpt
 from train import evaluate as E
 
+BACKENDS = ("mjx", "native")
 POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint:PATH")
 # Built-in scenes usable as tasks, with their episode lengths in env steps.
 BUILTIN_TASKS = {"drop": 50, "push_boxes": 50}
@@ -47,6 +49,29 @@ def make_task(name: str, **overrides):
   if name == "drop":
     return DamageWrapper(DropEnv(**overrides))
   return DamageWrapper(table_env(**{"k": 4, **overrides}))
+
+
+def check_backend(name) -> str:
+  if name not in BACKENDS:
+    raise ValueError(f"backend: unknown backend {name!r}; backends: {', '.join(BACKENDS)}")
+  return name
+
+
+def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
+  """``env`` itself for ``mjx``; its :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``num_envs`` for ``native``.
+
+  Raises ValueError for a scene the native backend cannot run (heat sources, liquid, built-in ``push_boxes``).
+  """
+  if check_backend(backend) == "mjx":
+    return env
+  return tasks.native.wrap(env, num_envs, nthread=nthread)
+
+
+def add_backend_argument(ap) -> None:
+  """``--backend mjx|native`` as every command spells it."""
+  ap.add_argument("--backend", default="mjx",
+                  help="physics: mjx (compiled MJX-JAX, batched on any device) or native (MuJoCo on C threads, "
+                       "CPU; scenes without heat sources or liquid)")
 
 
 def episode_length_of(env, task: Optional[str] = None) -> int:

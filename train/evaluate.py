@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.randomize import check_fragility
 
 Policy = Callable  # policy(state, rng) -> action f32[action_size], one env, jittable
@@ -205,6 +206,64 @@ class Evaluator:
     return jax.tree.map(lambda x: np.asarray(x)[:e], out)
 
 
+class NativeEvaluator:
+  """:class:`Evaluator`'s episodes on a :class:`~mjx_damage.native_batch.NativeBatchEnv`.
+
+  The same episode as :func:`run_episode` (keys split into reset/actions, the
+  action key folded with t, finished episodes frozen at their first ``done``),
+  stepped by the native backend: episodes run ``env.num_envs`` at a time (the
+  last group padded by repeating its last episode), one policy call, one
+  native step and one bookkeeping call per control step. ``run`` as
+  :meth:`Evaluator.run`.
+  """
+
+  def __init__(self, env: NativeBatchEnv, policy: Policy, episode_length: int):
+    if isinstance(episode_length, bool) or not isinstance(episode_length, int) or episode_length < 1:
+      raise ValueError(f"episode_length: must be an int >= 1, got {episode_length!r}")
+    self.env, self.policy, self.episode_length = env, policy, episode_length
+    self.devices = jax.devices()[:1]
+    apply = getattr(policy, "apply", None)
+    if apply is None:
+      apply, self.params = (lambda _, state, rng: policy(state, rng)), ()
+    else:
+      self.params = policy.params
+
+    def act(params, state, act_key, t):
+      return jax.vmap(lambda s, k: apply(params, s, jax.random.fold_in(k, t)))(state, act_key)
+
+    def advance(state, nxt, done, ret):
+      ret = ret + jnp.where(done > 0, 0.0, nxt.info.get("task_reward", nxt.reward))
+      keep = lambda a, b: jnp.where(jnp.reshape(done > 0, done.shape + (1,) * (a.ndim - 1)), b, a)
+      return jax.tree.map(keep, nxt, state), jnp.maximum(done, nxt.done), ret
+
+    self._split = jax.jit(lambda keys: jax.vmap(jax.random.split, out_axes=1)(keys))
+    self._fragility = jax.jit(jax.vmap(with_fragility))
+    self._act = jax.jit(act)
+    self._advance = jax.jit(advance)
+    self._summary = jax.jit(jax.vmap(summary))
+
+  def run(self, keys, fragility, params=None) -> dict:
+    params = self.params if params is None else params
+    if params is None:
+      raise ValueError("params: the policy has no default weights; pass params=")
+    keys = np.asarray(keys)
+    e, b = keys.shape[0], self.env.num_envs
+    fragility = np.broadcast_to(np.asarray(fragility, np.float32), (e,))
+    parts = []
+    for lo in range(0, e, b):
+      idx = np.minimum(np.arange(lo, lo + b), e - 1)
+      reset_key, act_key = self._split(keys[idx])
+      state = self._fragility(self.env.reset(reset_key), jnp.asarray(fragility[idx]))
+      done = jnp.zeros(state.done.shape, state.done.dtype)
+      ret = jnp.zeros(state.done.shape, jnp.float32)
+      for t in range(self.episode_length):
+        nxt = self.env.step(state, self._act(params, state, act_key, t))
+        state, done, ret = self._advance(state, nxt, done, ret)
+      out = dict(self._summary(state), task_return=ret)
+      parts.append(jax.tree.map(lambda x: np.asarray(x)[: min(b, e - lo)], out))
+    return jax.tree.map(lambda *xs: np.concatenate(xs), *parts)
+
+
 # --- metrics --------------------------------------------------------------------
 
 def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: float = 95.0,
@@ -285,20 +344,24 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
   """Evaluate ``policy`` on ``env`` for ``episodes`` episodes in one compiled call.
 
   Args:
-    env: a DamageWrapper-wrapped Brax env.
+    env: a DamageWrapper-wrapped Brax env (compiled :class:`Evaluator`), or a
+      :class:`~mjx_damage.native_batch.NativeBatchEnv` (native physics, :class:`NativeEvaluator`).
     policy: ``policy(state, rng) -> action`` for one env (jittable).
     episodes: N >= 1. seed: episode i uses ``episode_keys(seed, N)[i]``.
     fragility: f > 0, one factor or f32[N] (one per episode).
     episode_length: env steps per episode (default: the env's ``episode_length``).
     safe_threshold: final entity health above which a completed episode is safe.
-    devices: devices to shard the episodes over (default all local devices).
+    devices: devices to shard the episodes over (default all local devices; MJX only).
 
   Returns:
     {"metrics": :func:`metrics`, "per_episode": numpy arrays, "compile_s", "run_s"}.
   """
   check_args(episodes, fragility, safe_threshold, percentiles, seed)
   T = episode_length if episode_length is not None else env_episode_length(env)
-  ev = Evaluator(env, policy, T, devices)
+  if isinstance(env, NativeBatchEnv):
+    ev = NativeEvaluator(env, policy, T)
+  else:
+    ev = Evaluator(env, policy, T, devices)
   t0 = time.perf_counter()
   per_ep = ev.run(episode_keys(seed, episodes), fragility)
   run_s = time.perf_counter() - t0
