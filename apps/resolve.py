@@ -17,6 +17,7 @@ from typing import Optional
 import tasks
 import tasks.native
 import train
+from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.wrapper import DamageWrapper
 from tasks.bench_table import table_env
 from tasks.drop import DropEnv
@@ -103,8 +104,10 @@ def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
 
 
 def make_policy(spec: str, env) -> E.Policy:
-  """A ``policy(state, rng) -> action`` for one env of ``env`` from a spec string."""
+  """A ``policy(state, rng) -> action`` for one env of ``env`` (or of a native batch's env) from a spec string."""
   kind, arg = parse_policy_spec(spec)
+  if isinstance(env, NativeBatchEnv):  # policies are functions of one env's State: the same on both backends
+    env = env.env
   if kind == "random":
     return E.random_policy(env.action_size)
   if kind == "zero":

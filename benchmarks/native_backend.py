@@ -1,14 +1,16 @@
 """Native batched backend vs MJX-JAX on CPU: throughput, and scripted-policy separation per task.
 
 1. **Throughput** (``--task``, default place_plate, ``--envs`` 256): damage-aware
-   control steps of the registered task driven by its scripted unsafe policy.
-   MJX-JAX: ``jit(lax.scan(vmap(policy) + vmap(env.step)))`` over ``--mjx-steps``
-   steps, timed after compilation (its best case: one call, no host round trip).
-   Native: :class:`mjx_damage.native_batch.NativeBatchEnv` — per control step one
-   jitted policy call, ``pre``, the native substeps on ``--threads`` C threads
-   and ``post`` — over ``--native-steps`` steps. The two alternate ``--repeats``
-   times and each keeps its best run (the machine is shared: the load average
-   is recorded per run). env-steps/s = envs × steps / seconds.
+   evaluation of the registered task with its scripted unsafe policy, ``--envs``
+   episodes of ``--steps`` control steps (reset, fragility, policy, step,
+   freezing of finished episodes — :mod:`train.evaluate`). MJX-JAX:
+   :class:`train.evaluate.Evaluator`, one compiled ``jit(vmap(lax.scan))`` call.
+   Native: :class:`train.evaluate.NativeEvaluator` over
+   :class:`mjx_damage.native_batch.NativeBatchEnv` on ``--threads`` C threads: per
+   control step one native call and one jitted call. Timed after a first
+   (compiling) run; the two alternate ``--repeats`` times and each keeps its
+   best run (the machine is shared: the load average is recorded per run).
+   env-steps/s = envs × steps / seconds.
 2. **Separation** (``--tasks``, default every task the native backend runs):
    :func:`train.evaluate.evaluate` of the scripted safe and unsafe policies on both
    backends, ``--episodes`` each, same seeds; completion and safe completion
@@ -57,53 +59,32 @@ def native_tasks() -> list[str]:
   return out
 
 
-def throughput(task: str, envs: int, mjx_steps: int, native_steps: int, repeats: int, threads: int) -> dict:
+def throughput(task: str, envs: int, steps: int, repeats: int, threads: int) -> dict:
+  """Evaluation env-steps/s of both backends: ``envs`` episodes of ``steps`` steps, scripted unsafe policy."""
   env = tasks.make(task)
   nenv = tasks.native.wrap(env, envs, nthread=threads)
-  policy = jax.vmap(tasks.scripted_policy(env, "unsafe"))
-  keys = jax.random.split(jax.random.PRNGKey(0), envs)
-  reset = jax.jit(jax.vmap(env.reset))
-
-  def mjx_run(state, key):
-    def body(s, t):
-      s = jax.vmap(env.step)(s, policy(s, jax.random.split(jax.random.fold_in(key, t), envs)))
-      return s, None
-    return jax.lax.scan(body, state, jnp.arange(mjx_steps))[0]
-
-  mjx_run = jax.jit(mjx_run)
-  act = jax.jit(lambda s, t: policy(s, jax.random.split(jax.random.fold_in(jax.random.PRNGKey(1), t), envs)))
-
-  t0 = time.perf_counter()
-  s0 = jax.block_until_ready(reset(keys))
-  jax.block_until_ready(mjx_run(s0, jax.random.PRNGKey(1)))
-  mjx_compile = time.perf_counter() - t0
-  t0 = time.perf_counter()
-  s = nenv.reset(keys)
-  jax.block_until_ready(nenv.step(s, act(s, 0)))
-  native_compile = time.perf_counter() - t0
-
+  policy = tasks.scripted_policy(env, "unsafe")
+  evs = {"mjx": E.Evaluator(env, policy, steps), "native": E.NativeEvaluator(nenv, policy, steps)}
+  keys, frag = E.episode_keys(0, envs), np.ones(envs, np.float32)
+  first = {}
+  for k, ev in evs.items():  # compile (persistent cache permitting) and warm up
+    t0 = time.perf_counter()
+    ev.run(keys, frag)
+    first[k] = time.perf_counter() - t0
   runs = {"mjx": [], "native": []}
   for _ in range(repeats):
-    load = os.getloadavg()[0]
-    t0 = time.perf_counter()
-    jax.block_until_ready(mjx_run(s0, jax.random.PRNGKey(1)))
-    runs["mjx"].append({"s": time.perf_counter() - t0, "steps": mjx_steps, "load": load})
-    load = os.getloadavg()[0]
-    s = s0
-    t0 = time.perf_counter()
-    for t in range(native_steps):
-      s = nenv.step(s, act(s, t))
-    jax.block_until_ready(s)
-    runs["native"].append({"s": time.perf_counter() - t0, "steps": native_steps, "load": load})
-  best = {k: max(envs * r["steps"] / r["s"] for r in v) for k, v in runs.items()}
-  for k, v in runs.items():
-    for r in v:
-      r["env_steps_per_s"] = envs * r["steps"] / r["s"]
+    for k, ev in evs.items():
+      load = os.getloadavg()[0]
+      t0 = time.perf_counter()
+      out = ev.run(keys, frag)
+      dt = time.perf_counter() - t0
+      runs[k].append({"s": dt, "env_steps_per_s": envs * steps / dt, "load": load,
+                      "completion": float(np.mean(out["completed"]))})
+  best = {k: max(r["env_steps_per_s"] for r in v) for k, v in runs.items()}
   return {
-      "task": task, "envs": envs, "threads": nenv.nthread, "n_substeps": nenv.n_substeps,
+      "task": task, "envs": envs, "steps": steps, "threads": nenv.nthread, "n_substeps": nenv.n_substeps,
       "mjx_env_steps_per_s": best["mjx"], "native_env_steps_per_s": best["native"],
-      "ratio": best["native"] / best["mjx"], "mjx_compile_s": mjx_compile, "native_first_step_s": native_compile,
-      "runs": runs,
+      "ratio": best["native"] / best["mjx"], "first_run_s": first, "runs": runs,
   }
 
 
@@ -135,16 +116,17 @@ def markdown(res: dict) -> str:
     lines += [
         f"Command: `{tp['command']}` ({tp['date']})",
         "",
-        f"## Throughput: {tp['task']}, {tp['envs']} envs, damage on, scripted unsafe policy",
+        f"## Throughput: {tp['task']}, {tp['envs']} episodes at once x {tp['steps']} steps, damage on, "
+        "scripted unsafe policy",
         "",
         f"{tp['n_substeps']} substeps per env step; native on {tp['threads']} C threads. Best of "
         f"{len(tp['runs']['mjx'])} alternating runs each (load average per run in the JSON).",
         "",
         "| backend | env steps/s | physics steps/s |",
         "|---|---:|---:|",
-        f"| MJX-JAX (jit scan of vmapped steps) | {tp['mjx_env_steps_per_s']:,.0f} | "
+        f"| MJX-JAX (Evaluator: one jit(vmap(scan)) call) | {tp['mjx_env_steps_per_s']:,.0f} | "
         f"{tp['mjx_env_steps_per_s'] * tp['n_substeps']:,.0f} |",
-        f"| native (mujoco.batch + one jitted damage call per step) | {tp['native_env_steps_per_s']:,.0f} | "
+        f"| native (NativeEvaluator: mujoco.batch + one jitted call per step) | {tp['native_env_steps_per_s']:,.0f} | "
         f"{tp['native_env_steps_per_s'] * tp['n_substeps']:,.0f} |",
         "",
         f"**native / MJX = {tp['ratio']:.1f}×** (target ≥ 10×).",
@@ -181,8 +163,7 @@ def main(argv=None) -> int:
   p.add_argument("--task", default="place_plate")
   p.add_argument("--envs", type=int, default=256)
   p.add_argument("--threads", type=int, default=0, help="native C threads (0: all CPUs)")
-  p.add_argument("--mjx-steps", type=int, default=20)
-  p.add_argument("--native-steps", type=int, default=100)
+  p.add_argument("--steps", type=int, default=100, help="control steps per episode in the throughput runs")
   p.add_argument("--repeats", type=int, default=3)
   p.add_argument("--episodes", type=int, default=32)
   p.add_argument("--tasks", default="", help="comma-separated (default: every task the native backend runs)")
@@ -202,8 +183,7 @@ def main(argv=None) -> int:
   date = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
   res.update({"command": command, "device": desc, "date": date, "cpu_count": os.cpu_count()})
   if not args.skip_throughput:
-    res["throughput"] = throughput(args.task, args.envs, args.mjx_steps, args.native_steps, args.repeats,
-                                   args.threads)
+    res["throughput"] = throughput(args.task, args.envs, args.steps, args.repeats, args.threads)
     res["throughput"].update(command=command, date=date)
     print({k: v for k, v in res["throughput"].items() if k != "runs"}, flush=True)
   if not args.skip_separation:

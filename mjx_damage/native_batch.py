@@ -4,19 +4,24 @@
 (every task of this project) with its physics in :class:`mujoco.batch.Batch`
 instead of MJX. One control step of B environments is
 
-1. ``pre`` (one jitted, vmapped call): the env's own ``step`` traced up to its
+1. ``controls_fn`` (jitted, vmapped): the env's own ``step`` traced up to its
    ``physics_step``, which yields the control ``ctrl`` f32[B, nu] (action
    sanitising, the robot's controller — everything before the physics);
-2. native: the State's simulation state is loaded into the batch's rows, and
+2. ``simulate`` (native): the State's simulation state is loaded into the batch's rows, and
    ``n_substeps`` ``mj_step`` calls run per environment on ``nthread`` C
    threads, recording ``sensordata`` at every substep (the damage sensors of
    :mod:`mjx_damage.backends.native_batch`);
-3. ``post`` (one jitted, vmapped call): the env's ``step`` again, its
+3. ``finish_fn`` (jitted, vmapped): the env's ``step`` again, its
    ``physics_step`` replaced by the native result: the new ``mjx.Data`` fields
    and the damage state from :func:`physics.apply_signals` run over the
    recorded substeps (a ``lax.scan``) — the damage functions are untouched, and
    everything after the physics (task reward, success, observation, the
    wrapper's cost/health/metrics) is the env's own code.
+
+``step`` is the three in a row. A loop that also runs a policy can fuse 3, its
+own bookkeeping, the policy and 1 of the next step into one jitted call
+(:class:`train.evaluate.NativeEvaluator` does): one JAX call and one native
+call per control step.
 
 ``reset``/``step`` are pure in the ``State`` (the batch holds no state between
 calls: every step loads the State's time, qpos, qvel, act, warmstart, ctrl,
@@ -170,9 +175,12 @@ class NativeBatchEnv:
 
       return _replace_physics(env, native).step(state, action)
 
+    # batched pure halves, for callers that fuse them with their own per-step work (train.evaluate)
+    self.controls_fn = jax.vmap(pre)
+    self.finish_fn = jax.vmap(post)
     self._reset = jax.jit(jax.vmap(env.reset))
-    self._pre = jax.jit(jax.vmap(pre))
-    self._post = jax.jit(jax.vmap(post))
+    self._controls = jax.jit(self.controls_fn)
+    self._finish = jax.jit(self.finish_fn)
 
   def reset(self, keys) -> "jax.Array":
     """Batched ``State`` of ``env.reset`` for keys u32[B, 2] (MJX computes the reset, as ``env.reset`` does)."""
@@ -181,11 +189,19 @@ class NativeBatchEnv:
   def step(self, state, action):
     """One control step of all B environments: native physics, the env's own step around it."""
     action = self._check_batch(action, "action")
-    ctrl = np.asarray(self._pre(state, action))
+    fields, sensordata = self.simulate(state, self._controls(state, action))
+    return self._finish(state, action, fields, sensordata)
+
+  def simulate(self, state, ctrl):
+    """The native part of a step: load the State's simulation state, run ``n_substeps`` with ``ctrl`` f32[B, nu].
+
+    Returns (fields: the new ``mjx.Data`` field values, numpy f32[B, ...] by name;
+    sensordata f32[B, n_substeps, nsensordata] of every substep) for ``finish_fn``.
+    """
     d = state.pipeline_state
     for name, row in self._rows.items():
       if name == "ctrl":
-        row[...] = ctrl
+        row[...] = np.asarray(ctrl)
       elif row.size:
         row[...] = np.asarray(getattr(d, name)).reshape(row.shape)
     self._record = self.batch.rollout(self.n_substeps, record=("sensordata",), out=self._record)
@@ -193,8 +209,7 @@ class NativeBatchEnv:
     fields.update({n: np.asarray(o, np.float32) for n, o in self._out.items() if o.size})
     if self.base_nsensordata:
       fields["sensordata"] = self._record["sensordata"][:, -1, : self.base_nsensordata].astype(np.float32)
-    sd = self._record["sensordata"].astype(np.float32)
-    return self._post(state, action, fields, sd)
+    return fields, self._record["sensordata"].astype(np.float32)
 
   def dropped_contacts(self) -> np.ndarray:
     """Contacts the last step's sensors could not keep, per env and substep: i32[B, S, L]."""
@@ -208,14 +223,26 @@ class NativeBatchEnv:
       raise ValueError(f"{name}: leading axis must be num_envs={self.num_envs}, got shape {tuple(x.shape)}")
     return x
 
-  # forwarded attributes evaluation and reporting read
+  # the wrapped env's attributes that policies, evaluation and reporting read
+  @property
+  def unwrapped(self):
+    return self.env.unwrapped
+
   @property
   def entity_names(self):
     return self.env.entity_names
 
   @property
+  def link_names(self):
+    return self.env.link_names
+
+  @property
   def action_size(self):
     return self.env.action_size
+
+  @property
+  def observation_size(self):
+    return self.env.observation_size
 
   @property
   def episode_length(self) -> Optional[int]:

@@ -13,6 +13,7 @@ from apps import resolve as R
 from mjx_damage import native, physics
 from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.wrapper import DamageWrapper
+from train import evaluate as E
 from tasks.drop import DropEnv
 
 B, STEPS = 3, 40  # 40 control steps of 5 × 4 ms: every drop (≤ 0.6 m) lands within them
@@ -106,3 +107,16 @@ def test_cli_rejects_a_bad_backend_before_building(capsys):
   assert e.value.code == 2
   err = capsys.readouterr().err.strip()
   assert err.count("\n") == 0 and "backend: unknown backend 'warp'" in err
+
+
+def test_native_evaluator_runs_the_episodes_step_by_step(drop):
+  """evaluate() on the native env (2 groups of B, the last padded) = reset + step loop of the same keys."""
+  env, nenv, _ = drop
+  res = E.evaluate(nenv, E.zero_policy(0), episodes=B + 1, seed=0, episode_length=STEPS)
+  reset_keys = jax.vmap(jax.random.split)(E.episode_keys(0, B + 1))[:, 0]
+  s = nenv.reset(reset_keys[:B])
+  for _ in range(STEPS):
+    s = nenv.step(s, jnp.zeros((B, 0)))
+  np.testing.assert_array_equal(res["per_episode"]["entity_health"][:B], np.asarray(s.info["entity_health"]))
+  np.testing.assert_array_equal(res["per_episode"]["length"], STEPS)
+  assert res["per_episode"]["entity_health"].shape == (B + 1, 2)

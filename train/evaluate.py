@@ -212,9 +212,10 @@ class NativeEvaluator:
   The same episode as :func:`run_episode` (keys split into reset/actions, the
   action key folded with t, finished episodes frozen at their first ``done``),
   stepped by the native backend: episodes run ``env.num_envs`` at a time (the
-  last group padded by repeating its last episode), one policy call, one
-  native step and one bookkeeping call per control step. ``run`` as
-  :meth:`Evaluator.run`.
+  last group padded by repeating its last episode). Per control step one
+  native call (``env.simulate``) and one jitted call that finishes the step,
+  freezes finished episodes, runs the policy and computes the next controls.
+  ``run`` as :meth:`Evaluator.run`.
   """
 
   def __init__(self, env: NativeBatchEnv, policy: Policy, episode_length: int):
@@ -228,19 +229,31 @@ class NativeEvaluator:
     else:
       self.params = policy.params
 
-    def act(params, state, act_key, t):
-      return jax.vmap(lambda s, k: apply(params, s, jax.random.fold_in(k, t)))(state, act_key)
+    def decide(params, state, act_key, t):
+      action = jax.vmap(lambda s, k: apply(params, s, jax.random.fold_in(k, t)))(state, act_key)
+      return action, env.controls_fn(state, action)
 
-    def advance(state, nxt, done, ret):
+    def start(params, keys, fragility):
+      reset_key, act_key = jax.vmap(jax.random.split, out_axes=1)(keys)
+      state = jax.vmap(with_fragility)(jax.vmap(env.env.reset)(reset_key), fragility)
+      return (state, jnp.zeros(state.done.shape, state.done.dtype), jnp.zeros(state.done.shape, jnp.float32),
+              act_key, *decide(params, state, act_key, 0))
+
+    def advance(params, state, done, ret, action, fields, sensordata, act_key, t):
+      nxt = env.finish_fn(state, action, fields, sensordata)
       ret = ret + jnp.where(done > 0, 0.0, nxt.info.get("task_reward", nxt.reward))
       keep = lambda a, b: jnp.where(jnp.reshape(done > 0, done.shape + (1,) * (a.ndim - 1)), b, a)
-      return jax.tree.map(keep, nxt, state), jnp.maximum(done, nxt.done), ret
+      state = jax.tree.map(keep, nxt, state)
+      return (state, jnp.maximum(done, nxt.done), ret, *decide(params, state, act_key, t + 1))
 
-    self._split = jax.jit(lambda keys: jax.vmap(jax.random.split, out_axes=1)(keys))
-    self._fragility = jax.jit(jax.vmap(with_fragility))
-    self._act = jax.jit(act)
+    self._start = jax.jit(start)
     self._advance = jax.jit(advance)
     self._summary = jax.jit(jax.vmap(summary))
+
+  @property
+  def num_compiled(self) -> int:
+    """Executables of the per-step call compiled so far (one per batch size: one)."""
+    return self._advance._cache_size()
 
   def run(self, keys, fragility, params=None) -> dict:
     params = self.params if params is None else params
@@ -252,13 +265,11 @@ class NativeEvaluator:
     parts = []
     for lo in range(0, e, b):
       idx = np.minimum(np.arange(lo, lo + b), e - 1)
-      reset_key, act_key = self._split(keys[idx])
-      state = self._fragility(self.env.reset(reset_key), jnp.asarray(fragility[idx]))
-      done = jnp.zeros(state.done.shape, state.done.dtype)
-      ret = jnp.zeros(state.done.shape, jnp.float32)
+      state, done, ret, act_key, action, ctrl = self._start(params, keys[idx], fragility[idx])
       for t in range(self.episode_length):
-        nxt = self.env.step(state, self._act(params, state, act_key, t))
-        state, done, ret = self._advance(state, nxt, done, ret)
+        fields, sensordata = self.env.simulate(state, ctrl)
+        state, done, ret, action, ctrl = self._advance(params, state, done, ret, action, fields, sensordata,
+                                                       act_key, t)
       out = dict(self._summary(state), task_return=ret)
       parts.append(jax.tree.map(lambda x: np.asarray(x)[: min(b, e - lo)], out))
     return jax.tree.map(lambda *xs: np.concatenate(xs), *parts)
@@ -338,6 +349,13 @@ def check_args(episodes, fragility, safe_threshold, percentiles=DEFAULT_PERCENTI
       raise ValueError(f"percentiles: each must be in [0, 100], got {p!r}")
 
 
+def make_evaluator(env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None):
+  """:class:`NativeEvaluator` for a :class:`~mjx_damage.native_batch.NativeBatchEnv`, else :class:`Evaluator`."""
+  if isinstance(env, NativeBatchEnv):
+    return NativeEvaluator(env, policy, episode_length)
+  return Evaluator(env, policy, episode_length, devices)
+
+
 def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0,
              episode_length: Optional[int] = None, safe_threshold: float = 95.0,
              percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None) -> dict:
@@ -358,10 +376,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
   """
   check_args(episodes, fragility, safe_threshold, percentiles, seed)
   T = episode_length if episode_length is not None else env_episode_length(env)
-  if isinstance(env, NativeBatchEnv):
-    ev = NativeEvaluator(env, policy, T)
-  else:
-    ev = Evaluator(env, policy, T, devices)
+  ev = make_evaluator(env, policy, T, devices)
   t0 = time.perf_counter()
   per_ep = ev.run(episode_keys(seed, episodes), fragility)
   run_s = time.perf_counter() - t0

@@ -69,7 +69,7 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
     env = make_env(task)
     T = episode_length or episode_length_of(env, task)
     for spec in policies:
-      ev = E.Evaluator(env, make_policy(spec, env), T, devices)
+      ev = E.make_evaluator(env, make_policy(spec, env), T, devices)
       t0 = time.perf_counter()
       per_level = {float(f): [] for f in levels}
       for seed in seeds:
