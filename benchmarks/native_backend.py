@@ -15,9 +15,12 @@
    :func:`train.evaluate.evaluate` of the scripted safe and unsafe policies on both
    backends, ``--episodes`` each, same seeds; completion and safe completion
    must agree within ``--tolerance`` percentage points.
+3. **Impact loads** (``--task``, ``--peak-envs`` episodes): the largest per-substep F∥
+   on each link with the scripted unsafe policy on both backends — why health can
+   differ between them while the verdicts agree.
 
 Writes ``benchmarks/results/native_backend_<platform>.{json,md}`` (``--out`` overrides the stem); a
-section this run skips (``--skip-throughput``/``--skip-separation``) is kept from the existing JSON, and
+section this run skips (``--skip-throughput``/``--skip-peaks``/``--skip-separation``) is kept from the existing JSON, and
 each section records the command and date that produced it.
 
 Usage::
@@ -88,6 +91,24 @@ def throughput(task: str, envs: int, steps: int, repeats: int, threads: int) -> 
   }
 
 
+def peaks(task: str, envs: int, steps: int, threads: int) -> dict:
+  """Largest per-substep F∥ (N) on each tracked link over ``steps`` steps of the scripted unsafe policy,
+  mean over ``envs`` episodes, on both backends (same resets and action keys)."""
+  env = tasks.make(task)
+  nenv = tasks.native.wrap(env, envs, nthread=threads)
+  policy = jax.jit(jax.vmap(tasks.scripted_policy(env, "unsafe")))
+  step = {"mjx": jax.jit(jax.vmap(env.step)), "native": nenv.step}
+  state0 = nenv.reset(jax.random.split(jax.random.PRNGKey(0), envs))
+  out = {}
+  for k, fn in step.items():
+    s, peak = state0, np.zeros((envs, len(env.link_names)))
+    for t in range(steps):
+      s = fn(s, policy(s, jax.random.split(jax.random.PRNGKey(t), envs)))
+      peak = np.maximum(peak, np.asarray(s.info["damage_state"].f_par))
+    out[k] = dict(zip(env.link_names, peak.mean(0).round(1).tolist()))
+  return {"task": task, "envs": envs, "steps": steps, "peak_f_par_N": out}
+
+
 def separation(names: list[str], episodes: int, envs: int, threads: int, seed: int, tol: float) -> list[dict]:
   rows = []
   for name in names:
@@ -132,6 +153,16 @@ def markdown(res: dict) -> str:
         f"**native / MJX = {tp['ratio']:.1f}×** (target ≥ 10×).",
         "",
     ]
+  pk = res.get("peaks")
+  if pk:
+    lines += [f"## Impact loads: {pk['task']}, scripted unsafe policy, {pk['envs']} episodes x {pk['steps']} steps",
+              "", f"Command: `{pk['command']}` ({pk['date']})", "",
+              "Largest per-substep F∥ on each link (N), mean over episodes. Same scene, resets and policy: "
+              "native MuJoCo and MJX resolve the impact differently.", "",
+              "| link | MJX-JAX | native |", "|---|---:|---:|"]
+    lines += [f"| {n} | {pk['peak_f_par_N']['mjx'][n]:.1f} | {pk['peak_f_par_N']['native'][n]:.1f} |"
+              for n in pk["peak_f_par_N"]["mjx"]]
+    lines.append("")
   sep = res.get("separation")
   if sep:
     lines += [
@@ -171,6 +202,8 @@ def main(argv=None) -> int:
   p.add_argument("--tolerance", type=float, default=2.0, help="percentage points")
   p.add_argument("--skip-throughput", action="store_true")
   p.add_argument("--skip-separation", action="store_true")
+  p.add_argument("--skip-peaks", action="store_true")
+  p.add_argument("--peak-envs", type=int, default=8)
   p.add_argument("--out", default=None, help="output stem (default benchmarks/results/native_backend_<platform>)")
   args = p.parse_args(argv)
   _, desc = device_info()
@@ -186,6 +219,10 @@ def main(argv=None) -> int:
     res["throughput"] = throughput(args.task, args.envs, args.steps, args.repeats, args.threads)
     res["throughput"].update(command=command, date=date)
     print({k: v for k, v in res["throughput"].items() if k != "runs"}, flush=True)
+  if not args.skip_peaks:
+    res["peaks"] = peaks(args.task, args.peak_envs, args.steps, args.threads)
+    res["peaks"].update(command=command, date=date)
+    print(res["peaks"], flush=True)
   if not args.skip_separation:
     runnable = native_tasks()
     names = [n for n in args.tasks.split(",") if n] or runnable
