@@ -85,9 +85,9 @@ def sensor_model(env, spec: mujoco.MjSpec, slots: int = DEFAULT_SLOTS):
   """The env's scene with the damage sensors: (``MjModel``, :class:`SensorLayout`).
 
   ``spec`` must be the env's scene (same XML); every model array but the
-  sensors' is then copied from ``env.mj_model``, so edits made to the compiled
-  model after loading (robot placement …) carry over. Raises ValueError when
-  ``spec`` compiles to another scene.
+  sensors' (and every ``opt`` field) is then copied from ``env.mj_model``, so
+  edits made to the compiled model after loading (robot placement …) carry
+  over. Raises ValueError when ``spec`` compiles to a scene of other sizes.
   """
   inner = _innermost(env)
   base: mujoco.MjModel = inner.mj_model
@@ -104,9 +104,10 @@ def sensor_model(env, spec: mujoco.MjSpec, slots: int = DEFAULT_SLOTS):
     if a.shape != b.shape:
       raise ValueError(f"spec: not this env's scene (model.{name} has shape {b.shape}, the env's {a.shape})")
     b[...] = a
-  for opt in ("timestep", "integrator", "cone", "gravity", "iterations", "tolerance"):
-    if not np.array_equal(getattr(base.opt, opt), getattr(model.opt, opt)):
-      raise ValueError(f"spec: not this env's scene (opt.{opt} differs)")
+  for opt in dir(base.opt):  # options edited after loading carry over too
+    value = getattr(base.opt, opt)
+    if not opt.startswith("_") and isinstance(value, (int, float, np.ndarray)):
+      setattr(model.opt, opt, value)
   return model, layout
 
 
