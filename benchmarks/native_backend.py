@@ -152,6 +152,10 @@ def markdown(res: dict) -> str:
         "",
         f"**native / MJX = {tp['ratio']:.1f}×** (target ≥ 10×).",
         "",
+        "Runs (env steps/s @ 1-min load average of the 2-core machine): "
+        + "; ".join(f"{k}: " + ", ".join(f"{r['env_steps_per_s']:,.0f} @ {r['load']:.1f}" for r in v)
+                    for k, v in tp["runs"].items()),
+        "",
     ]
   pk = res.get("peaks")
   if pk:
