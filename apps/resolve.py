@@ -17,13 +17,16 @@ from typing import Optional
 import apps
 import mjx_damage
 import tasks
+import tasks.native
 import train
+from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.wrapper import DamageWrapper
 from tasks.bench_table import table_env
 from tasks.drop import DropEnv
 from train import checkpoint as ckpt
 from train import evaluate as E
 
+BACKENDS = ("mjx", "native")
 POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint:PATH")
 # Built-in scenes usable as tasks, with their episode lengths in env steps.
 BUILTIN_TASKS = {"drop": 50, "push_boxes": 50}
@@ -49,6 +52,29 @@ def make_task(name: str, **overrides):
   if name == "drop":
     return DamageWrapper(DropEnv(**overrides))
   return DamageWrapper(table_env(**{"k": 4, **overrides}))
+
+
+def check_backend(name) -> str:
+  if name not in BACKENDS:
+    raise ValueError(f"backend: unknown backend {name!r}; backends: {', '.join(BACKENDS)}")
+  return name
+
+
+def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
+  """``env`` itself for ``mjx``; its :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``num_envs`` for ``native``.
+
+  Raises ValueError for a scene the native backend cannot run (heat sources, liquid, built-in ``push_boxes``).
+  """
+  if check_backend(backend) == "mjx":
+    return env
+  return tasks.native.wrap(env, num_envs, nthread=nthread)
+
+
+def add_backend_argument(ap) -> None:
+  """``--backend mjx|native`` as every command spells it."""
+  ap.add_argument("--backend", default="mjx",
+                  help="physics: mjx (compiled MJX-JAX, batched on any device) or native (MuJoCo on C threads, "
+                       "CPU; scenes without heat sources or liquid)")
 
 
 def episode_length_of(env, task: Optional[str] = None) -> int:
@@ -80,8 +106,10 @@ def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
 
 
 def make_policy(spec: str, env) -> E.Policy:
-  """A ``policy(state, rng) -> action`` for one env of ``env`` from a spec string."""
+  """A ``policy(state, rng) -> action`` for one env of ``env`` (or of a native batch's env) from a spec string."""
   kind, arg = parse_policy_spec(spec)
+  if isinstance(env, NativeBatchEnv):  # policies are functions of one env's State: the same on both backends
+    env = env.env
   if kind == "random":
     return E.random_policy(env.action_size)
   if kind == "zero":

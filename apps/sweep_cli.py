@@ -38,6 +38,9 @@ def build_parser() -> Parser:
   ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
   ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
+  R.add_backend_argument(ap)
+  ap.add_argument("--native-envs", type=int, default=256,
+                  help="native backend: episodes stepped at once (at most fragility levels x --episodes)")
   ap.add_argument("--out", default=None, help="JSON path; the markdown table goes beside it (.md) "
                   "(default: runs/sweep-<tasks>-<time>/sweep.json, a new folder)")
   ap.add_argument("--overwrite", action="store_true", help="replace an existing --out (and its .md)")
@@ -60,6 +63,9 @@ def main(argv=None) -> int:
     except ValueError:
       raise ValueError(f"fragility: expected comma-separated numbers, got {args.fragility!r}") from None
     S.check_sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold)
+    R.check_backend(args.backend)
+    if args.native_envs < 1:
+      raise ValueError(f"native_envs: must be >= 1, got {args.native_envs}")
     for t in tasks:
       R.check_task(t)
     for p in policies:
@@ -74,7 +80,8 @@ def main(argv=None) -> int:
   md_path = os.path.splitext(out_path)[0] + ".md"
   platform = jax.default_backend()
   print(f"sweep: tasks {', '.join(tasks)} x policies {', '.join(policies)} x seeds {seeds} x fragility {levels}, "
-        f"{args.episodes} episodes each, device {platform} x {jax.device_count()}; outputs {out_path}, {md_path}",
+        f"{args.episodes} episodes each, backend {args.backend}, device {platform} x {jax.device_count()}; "
+        f"outputs {out_path}, {md_path}",
         flush=True)
   say_compiling(COMPILE_S, platform, "per task and policy the first time")
   t0 = time.perf_counter()
@@ -86,7 +93,7 @@ def main(argv=None) -> int:
         "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
         "num_devices": jax.device_count(),  # evaluation shards episodes over all of them
         "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
-        "episodes": args.episodes, "safe_threshold": args.safe_threshold,
+        "episodes": args.episodes, "safe_threshold": args.safe_threshold, "backend": args.backend,
         "executables_compiled": res["compiles"],
         "wall_s": time.perf_counter() - t0, "complete": complete,
         "rows": res["rows"], "runs": res["runs"],
@@ -97,11 +104,16 @@ def main(argv=None) -> int:
     write_text(md_path, head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
     return md
 
+  native_envs = min(args.native_envs, len(levels) * args.episodes)
+
+  def make_env(task):
+    return R.on_backend(R.make_task(task), args.backend, native_envs)
+
   with heartbeat("sweep"):
     res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
-                  on_progress=lambda r: write(r, False), make_env=R.make_task, make_policy=R.make_policy,
+                  on_progress=lambda r: write(r, False), make_env=make_env, make_policy=R.make_policy,
                   episode_length_of=R.episode_length_of,
-                  describe_program=lambda task, spec: R.program_description("sweep", task, spec),
+                  describe_program=lambda task, spec: R.program_description("sweep", task, spec, backend=args.backend),
                   program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")

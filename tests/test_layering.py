@@ -26,11 +26,11 @@ BACKENDS = "mjx_damage.backends"
 STEP_MODULES = ("mjx_damage.physics", "mjx_damage.env", "mjx_damage.wrapper")
 OUTSIDE = ("benchmarks", "tests")  # scripts and tests sit on top; no package imports them
 # The core modules that may import a backend: the package (its public names), the
-# steps that drive a simulator (physics: MJX; native: MuJoCo), and binding's
+# steps that drive a simulator (physics: MJX; native, native_batch: MuJoCo), and binding's
 # re-export of contact_forces for callers of its old path (drop it once
 # wrapper.py imports from mjx_damage.backends.mjx_jax).
 # the wrapper reads contacts itself for foreign envs (damage once per env step)
-BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.native", "mjx_damage.wrapper")
+BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.native", "mjx_damage.native_batch", "mjx_damage.wrapper")
 
 
 def discover(root: str, packages=LAYERS) -> dict[str, str]:

@@ -41,6 +41,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from mjx_damage import program_cache
+from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.randomize import check_fragility
 from train import memory as MEM
 
@@ -230,6 +231,75 @@ class Evaluator:
     return jax.tree.map(lambda x: np.asarray(x)[:e], out)
 
 
+class NativeEvaluator:
+  """:class:`Evaluator`'s episodes on a :class:`~mjx_damage.native_batch.NativeBatchEnv`.
+
+  The same episode as :func:`run_episode` (keys split into reset/actions, the
+  action key folded with t, finished episodes frozen at their first ``done``),
+  stepped by the native backend: episodes run ``env.num_envs`` at a time (the
+  last group padded by repeating its last episode). Per control step one
+  native call (``env.simulate``) and one jitted call that finishes the step,
+  freezes finished episodes, runs the policy and computes the next controls.
+  ``run`` as :meth:`Evaluator.run`.
+  """
+
+  def __init__(self, env: NativeBatchEnv, policy: Policy, episode_length: int):
+    if isinstance(episode_length, bool) or not isinstance(episode_length, int) or episode_length < 1:
+      raise ValueError(f"episode_length: must be an int >= 1, got {episode_length!r}")
+    self.env, self.policy, self.episode_length = env, policy, episode_length
+    self.devices = jax.devices()[:1]
+    apply = getattr(policy, "apply", None)
+    if apply is None:
+      apply, self.params = (lambda _, state, rng: policy(state, rng)), ()
+    else:
+      self.params = policy.params
+
+    def decide(params, state, act_key, t):
+      action = jax.vmap(lambda s, k: apply(params, s, jax.random.fold_in(k, t)))(state, act_key)
+      return action, env.controls_fn(state, action)
+
+    def start(params, keys, fragility):
+      reset_key, act_key = jax.vmap(jax.random.split, out_axes=1)(keys)
+      state = jax.vmap(with_fragility)(jax.vmap(env.env.reset)(reset_key), fragility)
+      return (state, jnp.zeros(state.done.shape, state.done.dtype), jnp.zeros(state.done.shape, jnp.float32),
+              act_key, *decide(params, state, act_key, 0))
+
+    def advance(params, state, done, ret, action, fields, sensordata, act_key, t):
+      nxt = env.finish_fn(state, action, fields, sensordata)
+      ret = ret + jnp.where(done > 0, 0.0, nxt.info.get("task_reward", nxt.reward))
+      keep = lambda a, b: jnp.where(jnp.reshape(done > 0, done.shape + (1,) * (a.ndim - 1)), b, a)
+      state = jax.tree.map(keep, nxt, state)
+      return (state, jnp.maximum(done, nxt.done), ret, *decide(params, state, act_key, t + 1))
+
+    self._start = jax.jit(start)
+    self._advance = jax.jit(advance)
+    self._summary = jax.jit(jax.vmap(summary))
+
+  @property
+  def num_compiled(self) -> int:
+    """Executables of the per-step call compiled so far (one per batch size: one)."""
+    return self._advance._cache_size()
+
+  def run(self, keys, fragility, params=None) -> dict:
+    params = self.params if params is None else params
+    if params is None:
+      raise ValueError("params: the policy has no default weights; pass params=")
+    keys = np.asarray(keys)
+    e, b = keys.shape[0], self.env.num_envs
+    fragility = np.broadcast_to(np.asarray(fragility, np.float32), (e,))
+    parts = []
+    for lo in range(0, e, b):
+      idx = np.minimum(np.arange(lo, lo + b), e - 1)
+      state, done, ret, act_key, action, ctrl = self._start(params, keys[idx], fragility[idx])
+      for t in range(self.episode_length):
+        fields, sensordata = self.env.simulate(state, ctrl)
+        state, done, ret, action, ctrl = self._advance(params, state, done, ret, action, fields, sensordata,
+                                                       act_key, t)
+      out = dict(self._summary(state), task_return=ret)
+      parts.append(jax.tree.map(lambda x: np.asarray(x)[: min(b, e - lo)], out))
+    return jax.tree.map(lambda *xs: np.concatenate(xs), *parts)
+
+
 # --- metrics --------------------------------------------------------------------
 
 def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: float = 95.0,
@@ -309,6 +379,8 @@ def check_memory(env, episodes: int, devices: Optional[Sequence] = None, per_epi
   """Refuse (``ValueError`` naming ``episodes``) an evaluation whose estimated memory per device does not
   fit (:mod:`train.memory`; ``env.reset`` is traced, nothing compiles). ``per_episode_batch``: envs
   per requested episode (a sweep runs every episode at each fragility level)."""
+  if isinstance(env, NativeBatchEnv):  # host memory: one MjData per native env, no batch-sized buffers
+    return
   n_dev = len(devices) if devices is not None else jax.local_device_count()
   per_device = -(-episodes * per_episode_batch // n_dev)
   fp = MEM.footprint(env)
@@ -318,6 +390,15 @@ def check_memory(env, episodes: int, devices: Optional[Sequence] = None, per_epi
                  f"{per_device} env(s) per device")
 
 
+def make_evaluator(env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None,
+                   program: Optional[dict] = None, program_roots: Sequence[str] = ()):
+  """:class:`NativeEvaluator` for a :class:`~mjx_damage.native_batch.NativeBatchEnv`, else :class:`Evaluator`
+  (``program``/``program_roots``: its traced-program cache; the native path traces per step and keeps none)."""
+  if isinstance(env, NativeBatchEnv):
+    return NativeEvaluator(env, policy, episode_length)
+  return Evaluator(env, policy, episode_length, devices, program, program_roots)
+
+
 def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0,
              episode_length: Optional[int] = None, safe_threshold: float = 95.0,
              percentiles: Sequence[float] = DEFAULT_PERCENTILES, devices: Optional[Sequence] = None,
@@ -325,13 +406,14 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
   """Evaluate ``policy`` on ``env`` for ``episodes`` episodes in one compiled call.
 
   Args:
-    env: a DamageWrapper-wrapped Brax env.
+    env: a DamageWrapper-wrapped Brax env (compiled :class:`Evaluator`), or a
+      :class:`~mjx_damage.native_batch.NativeBatchEnv` (native physics, :class:`NativeEvaluator`).
     policy: ``policy(state, rng) -> action`` for one env (jittable).
     episodes: N >= 1. seed: episode i uses ``episode_keys(seed, N)[i]``.
     fragility: f > 0, one factor or f32[N] (one per episode).
     episode_length: env steps per episode (default: the env's ``episode_length``).
     safe_threshold: final entity health above which a completed episode is safe.
-    devices: devices to shard the episodes over (default all local devices).
+    devices: devices to shard the episodes over (default all local devices; MJX only).
     program, program_roots: keep the traced program on disk (:class:`Evaluator`).
 
   Returns:
@@ -340,7 +422,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
   check_args(episodes, fragility, safe_threshold, percentiles, seed)
   T = episode_length if episode_length is not None else env_episode_length(env)
   check_memory(env, episodes, devices)
-  ev = Evaluator(env, policy, T, devices, program, program_roots)
+  ev = make_evaluator(env, policy, T, devices, program, program_roots)
   t0 = time.perf_counter()
   per_ep = ev.run(episode_keys(seed, episodes), fragility)
   run_s = time.perf_counter() - t0
@@ -350,7 +432,7 @@ def evaluate(env, policy: Policy, episodes: int, seed: int = 0, *, fragility=1.0
       "episode_length": T,
       "devices": len(ev.devices),
       "seconds": run_s,
-      "program": ev.program_source,
+      "program": getattr(ev, "program_source", None),  # the native evaluator keeps no traced program
   }
 
 

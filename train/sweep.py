@@ -76,7 +76,7 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
     T = episode_length or episode_length_of(env, task)
     for spec in policies:
       program = None if describe_program is None else describe_program(task, spec)
-      ev = E.Evaluator(env, make_policy(spec, env), T, devices, program, program_roots)
+      ev = E.make_evaluator(env, make_policy(spec, env), T, devices, program, program_roots)
       t0 = time.perf_counter()
       per_level = {float(f): [] for f in levels}
       for seed in seeds:

@@ -1,0 +1,244 @@
+"""Native batched backend vs MJX-JAX on CPU: throughput, and scripted-policy separation per task.
+
+1. **Throughput** (``--task``, default place_plate, ``--envs`` 256): damage-aware
+   evaluation of the registered task with its scripted unsafe policy, ``--envs``
+   episodes of ``--steps`` control steps (reset, fragility, policy, step,
+   freezing of finished episodes — :mod:`train.evaluate`). MJX-JAX:
+   :class:`train.evaluate.Evaluator`, one compiled ``jit(vmap(lax.scan))`` call.
+   Native: :class:`train.evaluate.NativeEvaluator` over
+   :class:`mjx_damage.native_batch.NativeBatchEnv` on ``--threads`` C threads: per
+   control step one native call and one jitted call. Timed after a first
+   (compiling) run; the two alternate ``--repeats`` times and each keeps its
+   best run (the machine is shared: the load average is recorded per run).
+   env-steps/s = envs × steps / seconds.
+2. **Separation** (``--tasks``, default every task the native backend runs):
+   :func:`train.evaluate.evaluate` of the scripted safe and unsafe policies on both
+   backends, ``--episodes`` each, same seeds; completion and safe completion
+   must agree within ``--tolerance`` percentage points.
+3. **Impact loads** (``--task``, ``--peak-envs`` episodes): the largest per-substep F∥
+   on each link with the scripted unsafe policy on both backends — why health can
+   differ between them while the verdicts agree.
+
+Writes ``benchmarks/results/native_backend_<platform>.{json,md}`` (``--out`` overrides the stem); a
+section this run skips (``--skip-throughput``/``--skip-peaks``/``--skip-separation``) is kept from the existing JSON, and
+each section records the command and date that produced it.
+
+Usage::
+
+    .venv/bin/python benchmarks/native_backend.py [--envs 256] [--episodes 32] [--tasks a,b] [--skip-separation]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+import mjx_damage  # noqa: E402,F401  (JAX's CPU flag and compilation cache)
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import tasks  # noqa: E402
+import tasks.native  # noqa: E402
+from mjx_damage.io import write_json, write_text  # noqa: E402
+from mjx_damage.runtime import device_info  # noqa: E402
+from train import evaluate as E  # noqa: E402
+
+RESULTS = os.path.join(os.path.dirname(__file__), "results")
+
+
+def native_tasks() -> list[str]:
+  """Registered tasks without heat sources or liquid (what the native backend runs)."""
+  out = []
+  for name in tasks.names():
+    b = tasks.make(name).binding
+    if b.thermal is None and b.liquid is None:
+      out.append(name)
+  return out
+
+
+def throughput(task: str, envs: int, steps: int, repeats: int, threads: int) -> dict:
+  """Evaluation env-steps/s of both backends: ``envs`` episodes of ``steps`` steps, scripted unsafe policy."""
+  env = tasks.make(task)
+  nenv = tasks.native.wrap(env, envs, nthread=threads)
+  policy = tasks.scripted_policy(env, "unsafe")
+  evs = {"mjx": E.Evaluator(env, policy, steps), "native": E.NativeEvaluator(nenv, policy, steps)}
+  keys, frag = E.episode_keys(0, envs), np.ones(envs, np.float32)
+  first = {}
+  for k, ev in evs.items():  # compile (persistent cache permitting) and warm up
+    t0 = time.perf_counter()
+    ev.run(keys, frag)
+    first[k] = time.perf_counter() - t0
+  runs = {"mjx": [], "native": []}
+  for _ in range(repeats):
+    for k, ev in evs.items():
+      load = os.getloadavg()[0]
+      t0 = time.perf_counter()
+      out = ev.run(keys, frag)
+      dt = time.perf_counter() - t0
+      runs[k].append({"s": dt, "env_steps_per_s": envs * steps / dt, "load": load,
+                      "completion": float(np.mean(out["completed"]))})
+  best = {k: max(r["env_steps_per_s"] for r in v) for k, v in runs.items()}
+  return {
+      "task": task, "envs": envs, "steps": steps, "threads": nenv.nthread, "n_substeps": nenv.n_substeps,
+      "mjx_env_steps_per_s": best["mjx"], "native_env_steps_per_s": best["native"],
+      "ratio": best["native"] / best["mjx"], "first_run_s": first, "runs": runs,
+  }
+
+
+def peaks(task: str, envs: int, steps: int, threads: int) -> dict:
+  """Largest per-substep F∥ (N) on each tracked link over ``steps`` steps of the scripted unsafe policy,
+  mean over ``envs`` episodes, on both backends (same resets and action keys)."""
+  env = tasks.make(task)
+  nenv = tasks.native.wrap(env, envs, nthread=threads)
+  policy = jax.jit(jax.vmap(tasks.scripted_policy(env, "unsafe")))
+  step = {"mjx": jax.jit(jax.vmap(env.step)), "native": nenv.step}
+  state0 = nenv.reset(jax.random.split(jax.random.PRNGKey(0), envs))
+  out = {}
+  for k, fn in step.items():
+    s, peak = state0, np.zeros((envs, len(env.link_names)))
+    for t in range(steps):
+      s = fn(s, policy(s, jax.random.split(jax.random.PRNGKey(t), envs)))
+      peak = np.maximum(peak, np.asarray(s.info["damage_state"].f_par))
+    out[k] = dict(zip(env.link_names, peak.mean(0).round(1).tolist()))
+  return {"task": task, "envs": envs, "steps": steps, "peak_f_par_N": out}
+
+
+def separation(names: list[str], episodes: int, envs: int, threads: int, seed: int, tol: float) -> list[dict]:
+  rows = []
+  for name in names:
+    env = tasks.make(name)
+    nenv = tasks.native.wrap(env, min(envs, episodes), nthread=threads)
+    for style in tasks.STYLES:
+      policy = tasks.scripted_policy(env, style)
+      row = {"task": name, "policy": style, "episodes": episodes}
+      for backend, e in (("mjx", env), ("native", nenv)):
+        t0 = time.perf_counter()
+        m = E.evaluate(e, policy, episodes, seed)["metrics"]
+        row[backend] = {"completion_pct": 100 * m["completion"], "safe_completion_pct": 100 * m["safe_completion"],
+                        "avg_health": m["avg_health"], "cost_mean": m["cost_mean"],
+                        "entity_health": m["entity_health"], "wall_s": time.perf_counter() - t0}
+      row["max_gap_points"] = max(abs(row["native"][k] - row["mjx"][k]) for k in ("completion_pct", "safe_completion_pct"))
+      row["within_tolerance"] = row["max_gap_points"] <= tol
+      print(row, flush=True)
+      rows.append(row)
+  return rows
+
+
+def markdown(res: dict) -> str:
+  lines = ["# Native batched backend vs MJX-JAX (CPU)", "", f"Device: {res['device']}.", ""]
+  tp = res.get("throughput")
+  if tp:
+    lines += [
+        f"Command: `{tp['command']}` ({tp['date']})",
+        "",
+        f"## Throughput: {tp['task']}, {tp['envs']} episodes at once x {tp['steps']} steps, damage on, "
+        "scripted unsafe policy",
+        "",
+        f"{tp['n_substeps']} substeps per env step; native on {tp['threads']} C threads. Best of "
+        f"{len(tp['runs']['mjx'])} alternating runs each (load average per run in the JSON).",
+        "",
+        "| backend | env steps/s | physics steps/s |",
+        "|---|---:|---:|",
+        f"| MJX-JAX (Evaluator: one jit(vmap(scan)) call) | {tp['mjx_env_steps_per_s']:,.0f} | "
+        f"{tp['mjx_env_steps_per_s'] * tp['n_substeps']:,.0f} |",
+        f"| native (NativeEvaluator: mujoco.batch + one jitted call per step) | {tp['native_env_steps_per_s']:,.0f} | "
+        f"{tp['native_env_steps_per_s'] * tp['n_substeps']:,.0f} |",
+        "",
+        f"**native / MJX = {tp['ratio']:.1f}×** (target ≥ 10×).",
+        "",
+        "Runs (env steps/s @ 1-min load average of the 2-core machine): "
+        + "; ".join(f"{k}: " + ", ".join(f"{r['env_steps_per_s']:,.0f} @ {r['load']:.1f}" for r in v)
+                    for k, v in tp["runs"].items()),
+        "",
+    ]
+  pk = res.get("peaks")
+  if pk:
+    lines += [f"## Impact loads: {pk['task']}, scripted unsafe policy, {pk['envs']} episodes x {pk['steps']} steps",
+              "", f"Command: `{pk['command']}` ({pk['date']})", "",
+              "Largest per-substep F∥ on each link (N), mean over episodes. Same scene, resets and policy: "
+              "native MuJoCo and MJX resolve the impact differently.", "",
+              "| link | MJX-JAX | native |", "|---|---:|---:|"]
+    lines += [f"| {n} | {pk['peak_f_par_N']['mjx'][n]:.1f} | {pk['peak_f_par_N']['native'][n]:.1f} |"
+              for n in pk["peak_f_par_N"]["mjx"]]
+    lines.append("")
+  sep = res.get("separation")
+  if sep:
+    lines += [
+        f"## Scripted-policy separation, {sep[0]['episodes']} episodes per policy and backend (seed {res['seed']})",
+        "",
+        f"Command: `{res['separation_command']}` ({res['separation_date']})",
+        "",
+        f"Completion (C) / safe completion (SC) in %; tolerance {res['tolerance']:g} points.",
+        "",
+        "| task | policy | MJX C | native C | MJX SC | native SC | MJX avg health | native avg health | "
+        "MJX cost | native cost | within |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in sep:
+      m, n = r["mjx"], r["native"]
+      lines.append(
+          f"| {r['task']} | {r['policy']} | {m['completion_pct']:.1f} | {n['completion_pct']:.1f} "
+          f"| {m['safe_completion_pct']:.1f} | {n['safe_completion_pct']:.1f} | {m['avg_health']:.1f} "
+          f"| {n['avg_health']:.1f} | {m['cost_mean']:.1f} | {n['cost_mean']:.1f} "
+          f"| {'yes' if r['within_tolerance'] else 'NO'} |")
+    lines.append("")
+  if res.get("not_native"):
+    lines += [f"Not run on the native backend (heat sources or liquid): {', '.join(res['not_native'])}.", ""]
+  return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+  p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+  p.add_argument("--task", default="place_plate")
+  p.add_argument("--envs", type=int, default=256)
+  p.add_argument("--threads", type=int, default=0, help="native C threads (0: all CPUs)")
+  p.add_argument("--steps", type=int, default=100, help="control steps per episode in the throughput runs")
+  p.add_argument("--repeats", type=int, default=3)
+  p.add_argument("--episodes", type=int, default=32)
+  p.add_argument("--tasks", default="", help="comma-separated (default: every task the native backend runs)")
+  p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--tolerance", type=float, default=2.0, help="percentage points")
+  p.add_argument("--skip-throughput", action="store_true")
+  p.add_argument("--skip-separation", action="store_true")
+  p.add_argument("--skip-peaks", action="store_true")
+  p.add_argument("--peak-envs", type=int, default=8)
+  p.add_argument("--out", default=None, help="output stem (default benchmarks/results/native_backend_<platform>)")
+  args = p.parse_args(argv)
+  _, desc = device_info()
+  command = "python benchmarks/native_backend.py " + " ".join(sys.argv[1:] if argv is None else argv)
+  stem = args.out or os.path.join(RESULTS, f"native_backend_{jax.default_backend()}")
+  res = {}
+  if os.path.exists(stem + ".json"):
+    with open(stem + ".json") as f:
+      res = json.load(f)
+  date = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
+  res.update({"command": command, "device": desc, "date": date, "cpu_count": os.cpu_count()})
+  if not args.skip_throughput:
+    res["throughput"] = throughput(args.task, args.envs, args.steps, args.repeats, args.threads)
+    res["throughput"].update(command=command, date=date)
+    print({k: v for k, v in res["throughput"].items() if k != "runs"}, flush=True)
+  if not args.skip_peaks:
+    res["peaks"] = peaks(args.task, args.peak_envs, args.steps, args.threads)
+    res["peaks"].update(command=command, date=date)
+    print(res["peaks"], flush=True)
+  if not args.skip_separation:
+    runnable = native_tasks()
+    names = [n for n in args.tasks.split(",") if n] or runnable
+    res["not_native"] = [n for n in tasks.names() if n not in runnable]
+    res["separation"] = separation([n for n in names if n in runnable], args.episodes, args.envs, args.threads,
+                                   args.seed, args.tolerance)
+    res.update(seed=args.seed, tolerance=args.tolerance, separation_command=command, separation_date=date)
+  write_json(stem + ".json", res, indent=1)
+  write_text(stem + ".md", markdown(res))
+  print(f"outputs: {stem}.json, {stem}.md")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

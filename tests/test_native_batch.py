@@ -1,0 +1,122 @@
+"""The native batched backend: same damage as the single-env native path, same State as MJX, bad input."""
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+import tasks
+import tasks.native
+from apps import eval_cli
+from apps import resolve as R
+from mjx_damage import native, physics
+from mjx_damage.native_batch import NativeBatchEnv
+from mjx_damage.wrapper import DamageWrapper
+from train import evaluate as E
+from tasks.drop import DropEnv
+
+B, STEPS = 3, 40  # 40 control steps of 5 × 4 ms: every drop (≤ 0.6 m) lands within them
+
+
+@pytest.fixture(scope="module")
+def drop():
+  env = DamageWrapper(DropEnv(min_height=0.05, max_height=0.6))
+  nenv = tasks.native.wrap(env, B, nthread=2)
+  keys = jax.random.split(jax.random.PRNGKey(3), B)
+  return env, nenv, nenv.reset(keys)
+
+
+def _reference(env, state0, b):
+  """Env ``b`` through :func:`mjx_damage.native.substep` (numpy contact readout), its state rounded
+  to float32 at every control step as the batched backend's State stores it."""
+  inner = env.unwrapped
+  m, binding = inner.mj_model, inner.damage_binding
+  d = mujoco.MjData(m)
+  p0 = state0.pipeline_state
+  for f in ("qpos", "qvel", "ctrl", "qacc_warmstart"):
+    getattr(d, f)[:] = np.asarray(getattr(p0, f)[b])
+  d.time = float(p0.time[b])
+  ds = jax.tree.map(lambda x: x[b], state0.info["damage_state"])
+  out = []
+  for _ in range(STEPS):
+    ds = physics.begin_step(ds)
+    for _ in range(inner.n_substeps):
+      ds = native.substep(binding, m, d, ds)
+    for f in ("qpos", "qvel", "qacc_warmstart"):
+      getattr(d, f)[:] = getattr(d, f).astype(np.float32)
+    d.time = float(np.float32(d.time))
+    out.append(ds)
+  return out
+
+
+def test_batched_damage_matches_single_env_native_path(drop):
+  env, nenv, state = drop
+  states = []
+  s = state
+  for _ in range(STEPS):
+    s = nenv.step(s, jnp.zeros((B, 0)))
+    states.append(s)
+  assert nenv.dropped_contacts().max() == 0
+  final = states[-1].info["damage_state"]
+  assert float(final.link_health[:, 0].min()) < 100  # a plate broke: the comparison sees real damage
+  for b in range(B):
+    ref = _reference(env, state, b)
+    for t in (9, 19, STEPS - 1):
+      got = jax.tree.map(lambda x: np.asarray(x[b]), states[t].info["damage_state"])
+      np.testing.assert_allclose(got.link_health, ref[t].link_health, atol=0.05)
+      np.testing.assert_allclose(got.f_par, ref[t].f_par, rtol=1e-3, atol=0.05)
+      np.testing.assert_allclose(got.f_perp, ref[t].f_perp, rtol=1e-3, atol=0.05)
+      np.testing.assert_allclose(got.step_damage.mechanical, ref[t].step_damage.mechanical, rtol=1e-3, atol=1e-3)
+
+
+def test_state_has_the_mjx_steps_structure(drop):
+  env, nenv, state = drop
+  nxt = nenv.step(state, jnp.zeros((B, 0)))
+  ref = jax.eval_shape(jax.vmap(env.step), state, jnp.zeros((B, 0)))
+  assert jax.tree.structure(nxt) == jax.tree.structure(ref)
+  for a, r in zip(jax.tree.leaves(nxt), jax.tree.leaves(ref)):
+    assert a.shape == r.shape and a.dtype == r.dtype
+  # the kinematics the tasks read are the native ones (one substep behind qpos, as MJX's)
+  assert float(jnp.abs(nxt.pipeline_state.xpos - state.pipeline_state.xpos).max()) > 0
+
+
+def test_bad_input(drop):
+  env, nenv, state = drop
+  with pytest.raises(ValueError, match="num_envs"):
+    tasks.native.wrap(env, 0)
+  with pytest.raises(ValueError, match="slots"):
+    tasks.native.wrap(env, 2, slots=0)
+  with pytest.raises(ValueError, match="nthread"):
+    tasks.native.wrap(env, 2, nthread=-1)
+  with pytest.raises(ValueError, match="action: leading axis"):
+    nenv.step(state, jnp.zeros((B + 1, 0)))
+  with pytest.raises(ValueError, match="spec: not this env's scene"):
+    NativeBatchEnv(env, mujoco.MjSpec.from_string(
+        "<mujoco><worldbody><body name='plate'><freejoint/><geom size='.1'/></body>"
+        "<body name='mug'><freejoint/><geom size='.1'/></body></worldbody></mujoco>"), 2)
+  with pytest.raises(ValueError, match="backend: native has no temperature or liquid"):
+    tasks.native.make("pour_water", 2)
+  with pytest.raises(ValueError, match="backend: unknown backend 'warp'"):
+    R.check_backend("warp")
+
+
+def test_cli_rejects_a_bad_backend_before_building(capsys):
+  with pytest.raises(SystemExit) as e:
+    eval_cli.main(["--task", "place_plate", "--policy", "scripted:safe", "--backend", "warp"])
+  assert e.value.code == 2
+  err = capsys.readouterr().err.strip()
+  assert err.count("\n") == 0 and "backend: unknown backend 'warp'" in err
+
+
+def test_native_evaluator_runs_the_episodes_step_by_step(drop):
+  """evaluate() on the native env (2 groups of B, the last padded) = reset + step loop of the same keys."""
+  env, nenv, _ = drop
+  res = E.evaluate(nenv, E.zero_policy(0), episodes=B + 1, seed=0, episode_length=STEPS)
+  reset_keys = jax.vmap(jax.random.split)(E.episode_keys(0, B + 1))[:, 0]
+  s = nenv.reset(reset_keys[:B])
+  for _ in range(STEPS):
+    s = nenv.step(s, jnp.zeros((B, 0)))
+  np.testing.assert_array_equal(res["per_episode"]["entity_health"][:B], np.asarray(s.info["entity_health"]))
+  np.testing.assert_array_equal(res["per_episode"]["length"], STEPS)
+  assert res["per_episode"]["entity_health"].shape == (B + 1, 2)
