@@ -61,6 +61,13 @@ SHELF_TOP = 0.10  # m
 SLOT_X = 0.245  # m, slot centre: at the back of the shelf (back edge x = 0.28)
 BOX_HALF = (0.03, 0.05, 0.08)  # m
 GRIP_DZ = 0.015  # m, grip point above the box centre (pads cover its upper part; palm clears the top)
+# The Panda hand's 8 cm stroke cannot take the box across its 10 cm width: with the Panda the box stands
+# turned a quarter (10 cm deep along x, 6 cm across the fingers), its slot 2 cm further forward so it
+# stays on the 18 cm shelf, and the grip point sits higher (the Panda's palm is 5.5 cm above the
+# fingertips, not 7): every robot grips the box's top with its palm 5 mm above the box.
+TURNED_BOX_HALF = (0.05, 0.03, 0.08)  # m
+TURNED_SLOT_X = 0.225  # m
+PALM_CLEARANCE = 0.005  # m, palm above the box top while gripping
 SAFE_BOTTOM = 0.27  # m, box-bottom height of the safe carry (glass top is 0.14)
 UNSAFE_BOTTOM = 0.13  # m, box-bottom height of the unsafe push into the slot (3 cm above the shelf)
 UNSAFE_SPEED = 0.6  # speed of the unsafe moves along x (fraction of the max step)
@@ -86,6 +93,15 @@ class ShelveItem(Task):
   workspace = ((-0.3, -0.3, 0.0), (0.35, 0.3, 0.45))
   default_episode_length = 150
 
+  def edit_scene(self, spec, robot_cls):
+    turned = robot_cls.name != "gripper"
+    self.box_half = TURNED_BOX_HALF if turned else BOX_HALF
+    self.slot_x = TURNED_SLOT_X if turned else SLOT_X
+    # rounded to µm: the gripper's is GRIP_DZ exactly
+    self.grip_dz = round(self.box_half[2] + PALM_CLEARANCE - robot_cls.finger_length, 6)
+    if turned:
+      spec.geom("cereal_box").size = list(self.box_half)
+
   def setup(self, m):
     self._adr = {n: free_joint_adr(m, n) for n in ("cereal_box",) + NEIGHBOURS}
 
@@ -102,13 +118,13 @@ class ShelveItem(Task):
     qpos = self.robot.home(qpos, eef)
     unit = jnp.array([1.0, 0, 0, 0])
     q = self._adr["cereal_box"][0]
-    qpos = qpos.at[q : q + 7].set(jnp.concatenate([box, jnp.array([BOX_HALF[2]]), unit]))
+    qpos = qpos.at[q : q + 7].set(jnp.concatenate([box, jnp.array([self.box_half[2]]), unit]))
     for n in NEIGHBOURS:
       dx, dy, z = NEIGHBOUR_POSE[n]
       dy = dy + (glass_dy if n == "wineglass" else 0.0)
       q = self._adr[n][0]
-      qpos = qpos.at[q : q + 7].set(jnp.concatenate([jnp.stack([SLOT_X + dx, ys + dy, z]), unit]))
-    slot = jnp.stack([SLOT_X, ys, SHELF_TOP + BOX_HALF[2]]).astype(jnp.float32)
+      qpos = qpos.at[q : q + 7].set(jnp.concatenate([jnp.stack([self.slot_x + dx, ys + dy, z]), unit]))
+    slot = jnp.stack([self.slot_x, ys, SHELF_TOP + self.box_half[2]]).astype(jnp.float32)
     return qpos, {"slot": slot}
 
   def task_obs(self, d, info):
@@ -120,12 +136,12 @@ class ShelveItem(Task):
     q, v = self._adr["cereal_box"]
     up = quat_z_axis(d.qpos[q + 3 : q + 7])[2]
     speed = jnp.linalg.norm(d.qvel[v : v + 3])
-    grasp = b + jnp.array([0.0, 0.0, GRIP_DZ])
+    grasp = b + jnp.array([0.0, 0.0, self.grip_dz])
     success = (
         (jnp.linalg.norm(b[:2] - info["slot"][:2]) < 0.03)
-        & (jnp.abs(b[2] - BOX_HALF[2] - SHELF_TOP) < 0.003)
+        & (jnp.abs(b[2] - self.box_half[2] - SHELF_TOP) < 0.003)
         & (up > 0.98) & (speed < 0.05)
-        & (self.robot.gap(d) > 2 * BOX_HALF[1] + 0.01)
+        & (self.robot.gap(d) > 2 * self.box_half[1] + 0.01)
     )
     reward = -2.0 * jnp.linalg.norm(b - info["slot"]) - 0.5 * jnp.linalg.norm(self.robot.eef_pos(d) - grasp)
     return reward, success, {"box_slot_distance": jnp.linalg.norm(b - info["slot"])}
@@ -135,10 +151,10 @@ class ShelveItem(Task):
     if style not in ("safe", "unsafe"):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     bottom = SAFE_BOTTOM if style == "safe" else UNSAFE_BOTTOM
-    carry_z = bottom + BOX_HALF[2] + GRIP_DZ
+    carry_z = bottom + self.box_half[2] + self.grip_dz
     # 3 cm inside each side: 12 N per finger, below the servo's 16 N cap so the spring keeps the box
     # centred between the fingers (with both fingers saturated it would drift sideways)
-    closed = R.gripper_command_for_gap(2 * BOX_HALF[1] - 0.06)
+    closed = R.gripper_command_for_gap(2 * self.box_half[1] - 0.06)
     speed = 1.0 if style == "safe" else UNSAFE_SPEED
     opened = 1.0
 
@@ -146,10 +162,10 @@ class ShelveItem(Task):
       d = state.pipeline_state
       slot = state.info["slot"]
       e, b, g = self.robot.eef_pos(d), self.pos(d, "cereal_box"), self.robot.gap(d)
-      grasp = b + jnp.array([0.0, 0.0, GRIP_DZ])
+      grasp = b + jnp.array([0.0, 0.0, self.grip_dz])
       xy_err = jnp.linalg.norm(e[:2] - grasp[:2])
       # (lenient on the gap: a blow to the box can pry the fingers apart a little)
-      held = (g < 2 * BOX_HALF[1] + 0.02) & (xy_err < 0.03) & (jnp.abs(e[2] - grasp[2]) < 0.03)
+      held = (g < 2 * self.box_half[1] + 0.02) & (xy_err < 0.03) & (jnp.abs(e[2] - grasp[2]) < 0.03)
       box_slot = jnp.linalg.norm(b[:2] - slot[:2])
       released = (~held) & (box_slot < 0.05)
 
@@ -170,7 +186,7 @@ class ShelveItem(Task):
         # sideways blow turns the box about x, which the pads' normal forces resist; a blow along x (the
         # straight push) turns it about y, which only the pads' friction resists, and tips it in the grip.
         gx, lane_y = slot[0] + GLASS_DX, slot[1] - SWEEP_LANE
-        sweep_z = SWEEP_BOTTOM + BOX_HALF[2] + GRIP_DZ
+        sweep_z = SWEEP_BOTTOM + self.box_half[2] + self.grip_dz
         off = e - b
         past = b[0] >= gx - 0.02  # in the sweep column, in front of the glass's slot line
         swept = past & ((b[1] >= slot[1] - 0.01) | (e[2] > sweep_z + 0.015))
@@ -185,7 +201,7 @@ class ShelveItem(Task):
       # height of the box's lowest corner above the shelf (a box tilted in the grip touches with a corner)
       q = self._adr["cereal_box"][0]
       up = quat_z_axis(d.qpos[q + 3 : q + 7])[2]
-      gap_below = b[2] - BOX_HALF[2] * up - BOX_HALF[1] * jnp.sqrt(jnp.maximum(1.0 - up * up, 0.0)) - SHELF_TOP
+      gap_below = b[2] - self.box_half[2] * up - self.box_half[1] * jnp.sqrt(jnp.maximum(1.0 - up * up, 0.0)) - SHELF_TOP
       lower = jnp.stack([slot[0] + e[0] - b[0], slot[1] + e[1] - b[1], e[2] - gap_below - 0.003])
       touching = gap_below < 0.001
       a_lower = R.action(R.move_toward(e, lower, speed=jnp.clip(gap_below / 0.05, 0.1, 0.6)), closed)
