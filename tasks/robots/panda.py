@@ -157,9 +157,9 @@ class Panda(Robot):
   nq = 9
   nu = 9
   finger_length = FINGER_LENGTH
-  # The joint servos' damping term (kv·q̇) shares the 87 N·m torque limit with the drive, which caps
-  # joints 1–2 near 0.9 / 0.45 rad/s: the hand travels ≈ 0.3 m/s at full action (the gripper 0.83 m/s),
-  # so tasks' default episodes are twice as long with the Panda.
+  # At full action the hand covers only about half of the commanded 2 cm per control step in long moves
+  # (joint servos lag their IK targets; the gripper's slides cover nearly all of it), so tasks' default
+  # episodes are twice as long with the Panda.
   episode_scale = 2.0
   default_mount = DEFAULT_MOUNT
 
