@@ -66,7 +66,8 @@ class Task(DamageEnv):
 
   Args:
     episode_length: default number of control steps of an episode (used by the
-      benchmark/training wrappers; the env itself never truncates).
+      benchmark/training wrappers; the env itself never truncates); None: the task's
+      ``default_episode_length`` × the robot's ``episode_scale`` (the Panda's hand is slower: 2×).
     n_substeps: physics steps per control step (timestep from the XML, 4 ms).
     obs_mode: ``"full"`` or one of the task's ``obs_modes``.
     terminate_on_success: ``done = 1`` on the first step the success condition holds.
@@ -96,7 +97,7 @@ class Task(DamageEnv):
       success_bonus: float = 1.0,
   ):
     if episode_length is None:
-      episode_length = self.default_episode_length
+      episode_length = int(round(self.default_episode_length * robots.robot_class(self.robot_name).episode_scale))
     if isinstance(episode_length, bool) or not isinstance(episode_length, int) or episode_length < 1:
       raise ValueError(f"episode_length: must be a positive int, got {episode_length!r}")
     if obs_mode not in self.obs_modes:
@@ -129,13 +130,22 @@ class Task(DamageEnv):
     return {"entities": {**cls.entities, "agent": dict(R.AGENT_ENTITY)}}
 
   def load_scene(self, robot_cls) -> mujoco.MjModel:
-    """Compile the task's scene XML with ``robot.xml`` resolved to ``robot_cls``'s MJCF."""
+    """Compile the task's scene XML with ``robot.xml`` resolved to ``robot_cls``'s MJCF, after
+    :meth:`edit_scene` (tasks that override it go through ``mujoco.MjSpec``, the same compiler)."""
     path = os.path.join(os.path.dirname(__import__(type(self).__module__, fromlist=["_"]).__file__), self.xml)
     with open(path) as f:
       text = f.read()
     with open(robot_cls.xml, "rb") as f:
       robot_xml = f.read()
-    return mujoco.MjModel.from_xml_string(text, {"robot.xml": robot_xml})
+    if type(self).edit_scene is Task.edit_scene:
+      return mujoco.MjModel.from_xml_string(text, {"robot.xml": robot_xml})
+    spec = mujoco.MjSpec.from_string(text, include={"robot.xml": robot_xml})
+    self.edit_scene(spec, robot_cls)
+    return spec.compile()
+
+  def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
+    """Adapt the scene to the robot before it compiles (e.g. an object the Panda's 8 cm stroke can grasp);
+    the default changes nothing. Runs before ``setup``; per-robot sizes the task code reads are set here."""
 
   def setup(self, m: mujoco.MjModel) -> None:
     """Look up static indices in the compiled model (called once in ``__init__``)."""

@@ -1,7 +1,9 @@
 """Place Plate — pick a plate up from the counter and put it on a marked spot (impact to plate).
 
 Scene (``place_plate.xml``): counter = plane z = 0; a 12 × 12 × 2 cm, 0.3 kg plate
-(a round side plate modelled as a square slab) resting on it; a goal marker.
+(a round side plate modelled as a square slab) resting on it; a goal marker. With the
+Panda (8 cm finger stroke) the plate is an oblong 12 × 6 × 2 cm, 0.3 kg serving plate,
+gripped across its 6 cm width (:data:`PLATE_HALF_Y`).
 
 Tracked entities and parameters (DAMAGE_MODEL.md §5):
 
@@ -16,8 +18,8 @@ x, y ∈ [−0.05, 0.05], z ∈ [0.12, 0.18] m, gripper open.
 
 Success (``metrics["success"]``, per step): the plate rests on the counter
 (centre z < 11.5 mm, upright within ≈ 11°, speed < 5 cm/s) with its centre
-within 3 cm of the goal, and the gripper has let go (gap > 13 cm, ≥ 5 mm
-clearance each side).
+within 3 cm of the goal, and the gripper has let go (gap > plate width + 1 cm:
+13 cm with the gripper, 7 cm with the Panda; ≥ 5 mm clearance each side).
 
 Dense task reward: ``−2·‖plate − goal‖`` (m; goal at the plate's resting
 height) ``+ success_bonus`` while successful; the counter start adds the
@@ -62,7 +64,13 @@ import mujoco
 from tasks import robot as R
 from tasks.base import Task, free_joint_adr, quat_z_axis
 
-PLATE_HALF = 0.06  # m, half width of the plate slab
+PLATE_HALF = 0.06  # m, half width of the plate slab (the gripper's; see PLATE_HALF_Y)
+# Half width (m) across the fingers (world y) of the plate each robot gets. The gripper's 16 cm stroke
+# takes the 12 cm side plate across; the Panda hand's 8 cm cannot, and a rim grasp would need the hand
+# tilted, so its plate is an oblong 12 × 6 cm serving plate (same 2 cm thickness and 0.3 kg mass, so a
+# drop breaks it the same way), taken across its 6 cm width with 1 cm clearance per side.
+PLATE_HALF_Y = {"gripper": PLATE_HALF}
+NARROW_PLATE_HALF_Y = 0.03
 PLATE_REST_Z = 0.01  # m, plate centre height when resting on the counter
 GOAL_CENTRE = (0.15, 0.0)
 CARRY_Z = 0.10  # m, grip-point height while carrying (safe policy)
@@ -71,7 +79,10 @@ IN_HAND_Z = (0.25, 0.35)  # m, plate centre height range of the in-hand start
 IN_HAND_XY = 0.05  # m, largest xy offset of the in-hand start from the goal (per axis)
 IN_HAND_SPEED = 0.4  # m/s, default hand speed limit with the plate in hand (the robot alone: ≈ 0.83 m/s)
 GRASP_Z = 0.004  # m, grip-point (fingertip) height when grasping: 4 mm above the counter
-GRIP_CLOSED = float(R.gripper_command_for_gap(2 * PLATE_HALF - 0.06))  # target 3 cm inside each side: 12 N grip
+
+def grip_closed(half_y):
+  """Gripper command closing on a plate of half width ``half_y`` (m): target 3 cm inside each side, 12 N."""
+  return float(R.gripper_command_for_gap(2 * half_y - 0.06))
 
 
 class PlacePlate(Task):
@@ -111,6 +122,14 @@ class PlacePlate(Task):
       action = a.at[0:3].multiply(self._speed_scale)
     return super().step(state, action)
 
+  def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
+    self.plate_half_y = PLATE_HALF_Y.get(robot_cls.name, NARROW_PLATE_HALF_Y)
+    self.grip_closed = grip_closed(self.plate_half_y)
+    if self.plate_half_y != PLATE_HALF:
+      for name in ("plate", "goal"):
+        g = spec.geom(name)
+        g.size = [g.size[0], self.plate_half_y, g.size[2]]
+
   def setup(self, m: mujoco.MjModel) -> None:
     self._pq, self._pv = free_joint_adr(m, "plate")
     self._goal_mocap = int(m.body_mocapid[m.body("goal").id])
@@ -134,7 +153,7 @@ class PlacePlate(Task):
       z = jax.random.uniform(k[0], (1,), minval=IN_HAND_Z[0], maxval=IN_HAND_Z[1])
       plate = jnp.concatenate([goal_xy + off, z])
       eef = plate + jnp.array([0.0, 0.0, GRASP_Z - PLATE_REST_Z])
-      qpos = self.robot.home(qpos, eef, PLATE_HALF + R.FINGER_HALF_THICK)
+      qpos = self.robot.home(qpos, eef, self.plate_half_y + R.FINGER_HALF_THICK)
     else:
       plate = jnp.concatenate([plate_xy, jnp.array([PLATE_REST_Z])])
       eef = jax.random.uniform(k[2], (3,), minval=jnp.array([-0.05, -0.05, 0.12]), maxval=jnp.array([0.05, 0.05, 0.18]))
@@ -149,7 +168,7 @@ class PlacePlate(Task):
     mp = d.mocap_pos.at[self._goal_mocap].set(state.info["goal"].at[2].set(0.0005))
     d = d.replace(mocap_pos=mp)
     if self.start == "in_hand":  # servo the fingers to the squeezing grip the carry phase uses
-      d = d.replace(ctrl=d.ctrl.at[3:5].set(self.robot.finger_ctrl(GRIP_CLOSED)))
+      d = d.replace(ctrl=d.ctrl.at[3:5].set(self.robot.finger_ctrl(self.grip_closed)))
     return state.replace(pipeline_state=d)
 
   def task_obs(self, d, info):
@@ -171,7 +190,7 @@ class PlacePlate(Task):
         & (p[2] < PLATE_REST_Z + 0.0015)
         & (up > 0.98)
         & (speed < 0.05)
-        & (self.robot.gap(d) > 2 * PLATE_HALF + 0.01)
+        & (self.robot.gap(d) > 2 * self.plate_half_y + 0.01)
     )
     # The reach term is pick-up shaping for the counter start; with the plate in hand the reward is
     # the paper's: distance to the goal only (a hand that lets go is not penalised for staying up).
@@ -189,7 +208,7 @@ class PlacePlate(Task):
     if style not in ("safe", "unsafe"):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
-    closed = GRIP_CLOSED
+    closed = self.grip_closed
     opened = 1.0
 
     def act(state, rng):
@@ -200,7 +219,7 @@ class PlacePlate(Task):
       g = self.robot.gap(d)
       xy_to_plate = jnp.linalg.norm(e[:2] - p[:2])
       plate_goal_xy = jnp.linalg.norm(p[:2] - goal[:2])
-      held = (g < 2 * PLATE_HALF + 0.004) & (xy_to_plate < 0.02) & (jnp.abs(e[2] - p[2]) < 0.03)
+      held = (g < 2 * self.plate_half_y + 0.004) & (xy_to_plate < 0.02) & (jnp.abs(e[2] - p[2]) < 0.03)
       released = (~held) & (plate_goal_xy < 0.05)
       # safe: carry at CARRY_Z; unsafe: never descend, at least DROP_Z (from the in-hand start it
       # drops from where it holds the plate: the fastest shortcut)

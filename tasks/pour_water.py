@@ -51,7 +51,9 @@ import mujoco
 from mjx_damage import liquid as Lq
 from tasks import robot as R
 from tasks.base import Task, free_joint_adr
+from tasks.robots import panda as P
 from tasks.robots.gripper import Gripper
+from tasks.robots.interface import sanitize
 
 PARTICLES = 128
 RADIUS = 0.006  # m
@@ -76,6 +78,25 @@ class _WristRobot(Gripper):
     target = jnp.clip(d.qpos[0:3] + a[0:3] * R.MAX_STEP, lo, hi)
     tilt = 0.5 * (a[3] + 1.0) * TILT_MAX
     return jnp.concatenate([target, jnp.array([R.Q_MAX, R.Q_MAX]), jnp.reshape(tilt, (1,))])
+
+
+class _PandaTilt(P.Panda):
+  """The Panda with the gripper channel driving the glass's tilt (a task actuator); fingers held open.
+
+  The tilt hinge stands for a wrist here as with the gripper: the glass hangs in a holder welded to the
+  hand, so the arm's controller keeps the hand pointing down and the hinge pours."""
+
+  def ctrl(self, d, action, lo, hi, extra_ctrl=None):
+    a = sanitize(action)
+    tilt = 0.5 * (a[3] + 1.0) * TILT_MAX
+    return super().ctrl(d, a.at[3].set(1.0), lo, hi, extra_ctrl=jnp.reshape(tilt, (1,)))
+
+
+# per robot: the robot class with the tilt channel, and the weld of the glass holder (a world-aligned
+# frame at the grip point when the hand points down) to the robot's hand body: (body, relpose of the
+# hand in the holder's frame; None: the pose at qpos0, where the gripper's hand frame is the holder's)
+TILT_ROBOTS = {"gripper": (_WristRobot, "hand", None),
+               "panda": (_PandaTilt, "panda_hand", (0.0, 0.0, P.GRIP_OFFSET, 0.0, 1.0, 0.0, 0.0))}
 
 
 def tilt_action(theta):
@@ -107,8 +128,19 @@ class PourWater(Task):
     }
     return cfg
 
+  def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
+    if robot_cls.name not in TILT_ROBOTS:
+      raise ValueError(f"robot: pour_water has no tilt channel for {robot_cls.name!r}; valid: {', '.join(TILT_ROBOTS)}")
+    _, body, relpose = TILT_ROBOTS[robot_cls.name]
+    if relpose is not None:
+      weld = next(e for e in spec.equalities if e.name == "hold")
+      weld.name2 = body
+      data = list(weld.data)
+      data[3:10] = relpose
+      weld.data = data
+
   def setup(self, m: mujoco.MjModel) -> None:
-    self.robot = _WristRobot(m, self.robot.control_dt)
+    self.robot = TILT_ROBOTS[self.robot.name][0](m, self.robot.control_dt)
     self._hq, _ = free_joint_adr(m, "glass_holder")
     j = m.joint("tilt").id
     self._tq, self._tv = int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])

@@ -2,7 +2,7 @@
 
 Scene (``wipe_counter.xml``): counter = plane z = 0; a 5 × 7 × 9 cm sponge
 held between the fingers with its top against the palm, protruding 2 cm below
-the fingertips; a spill of 16 dirt points on a 4 × 4 grid, 12 × 12 cm.
+the fingertips (3.5 cm with the Panda, whose palm is 5.5 cm above them); a spill of 16 dirt points on a 4 × 4 grid, 12 × 12 cm.
 
 Tracked entities and parameters:
 
@@ -44,7 +44,12 @@ from tasks import robot as R
 from tasks.base import Task, free_joint_adr
 
 SPONGE_HALF = (0.025, 0.035, 0.045)  # m
-SPONGE_DZ = 0.025  # m, sponge centre above the grip point (its top touches the palm)
+
+
+def sponge_dz(finger_length):
+  """Sponge centre above the grip point (m) with its top against the palm of a robot whose palm is
+  ``finger_length`` m above the fingertips (rounded to µm, so the gripper's is exactly 0.025 as before)."""
+  return round(finger_length - SPONGE_HALF[2], 6)
 N_DIRT = 16
 PATCH_HALF = 0.06  # m
 CONTACT_Z = 0.002  # m, sponge bottom below this counts as touching the counter
@@ -74,7 +79,7 @@ class WipeCounter(Task):
     eef = jnp.concatenate([centre + off[:2], off[2:]])
     # fingers 0.5 mm inside the sponge: the grip holds from the first substep
     qpos = self.robot.home(qpos, eef, SPONGE_HALF[1] + R.FINGER_HALF_THICK - 0.0005)
-    qpos = qpos.at[self._q : self._q + 7].set(jnp.concatenate([eef + jnp.array([0, 0, SPONGE_DZ]), jnp.array([1.0, 0, 0, 0])]))
+    qpos = qpos.at[self._q : self._q + 7].set(jnp.concatenate([eef + jnp.array([0, 0, sponge_dz(self.robot.finger_length)]), jnp.array([1.0, 0, 0, 0])]))
     g = jnp.linspace(-PATCH_HALF, PATCH_HALF, 4)
     dirt = centre + jnp.stack(jnp.meshgrid(g, g), -1).reshape(N_DIRT, 2)
     return qpos, {"dirt": dirt, "clean": jnp.zeros((N_DIRT,), jnp.float32), "spill_centre": centre}

@@ -10,6 +10,8 @@ joint range by more than 0.01 rad and stay finite.
 
 from __future__ import annotations
 
+import os
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -151,3 +153,35 @@ def test_random_actions_respect_joint_limits():
 def test_random_actions_respect_joint_limits_batched():
   # 8 envs × 500 control steps; benchmarks/panda_ik.py runs 10⁴ steps for both action spaces
   _check_random_actions(8, 500, 4)
+
+
+@pytest.mark.parametrize("name", ["place_plate", "pour_water"])
+def test_gripper_scenes_unchanged_by_per_robot_edits(name):
+  """Tasks that adapt their scene per robot (Task.edit_scene, via MjSpec) compile the gripper's scene exactly
+  as the plain XML does."""
+  cls = tasks.task_class(name)
+  task = cls.__new__(cls)
+  m = task.load_scene(Gripper)
+  with open(os.path.join(os.path.dirname(tasks.__file__), cls.xml)) as f, open(Gripper.xml, "rb") as g:
+    want = mujoco.MjModel.from_xml_string(f.read(), {"robot.xml": g.read()})
+  for k in dir(want):
+    a = getattr(want, k)
+    if not k.startswith("_") and isinstance(a, np.ndarray):
+      np.testing.assert_array_equal(getattr(m, k), a, err_msg=k)
+
+
+def test_panda_task_adaptations():
+  """What each task changes for the Panda's 8 cm stroke and shorter fingers (documented in the task modules)."""
+  env = tasks.make("place_plate", robot="panda")
+  t = env.unwrapped
+  assert t.plate_half_y == 0.03 and t.episode_length == 200  # 12 × 6 cm plate; 2 × the gripper's 100 steps
+  np.testing.assert_allclose(t.mj_model.geom_size[t.mj_model.geom("plate").id], [0.06, 0.03, 0.01])
+  assert tasks.make("place_plate").unwrapped.episode_length == 100
+  assert tasks.make("place_plate", robot="panda", episode_length=50).unwrapped.episode_length == 50
+  p = tasks.make("pour_water", robot="panda").unwrapped
+  m = p.mj_model
+  weld = m.equality("hold").id
+  assert m.eq_obj2id[weld] == m.body("panda_hand").id
+  np.testing.assert_allclose(m.eq_data[weld, 3:10], [0, 0, P.GRIP_OFFSET, 0, 1, 0, 0])
+  with pytest.raises(ValueError, match="robot: pour_water has no tilt channel for 'panda_wrist'"):
+    tasks.make("pour_water", robot="panda_wrist")

@@ -39,6 +39,7 @@ class Gripper(Robot):
   agent_bodies = ("hand", "finger_left", "finger_right")
   nq = 5
   nu = 5
+  finger_length = FINGER_LENGTH
 
   def __init__(self, m: mujoco.MjModel, control_dt: float):
     names = ["hand_x", "hand_y", "hand_z", "finger_left", "finger_right"]

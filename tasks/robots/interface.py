@@ -66,6 +66,8 @@ class Robot(abc.ABC):
   nq: ClassVar[int] = 0  # robot qpos entries (first in the scene)
   nu: ClassVar[int] = 0  # robot actuators (first in the scene)
   default_mount: ClassVar[tuple | None] = None  # fixed-base arms: base (x, y, z, yaw) unless the task says
+  finger_length: ClassVar[float] = 0.0  # m, grip point (fingertips) to the palm's underside
+  episode_scale: ClassVar[float] = 1.0  # tasks' default episode lengths × this (slower robots get longer)
 
   def __init__(self, m: mujoco.MjModel, control_dt: float):
     self.scene_nu = int(m.nu)

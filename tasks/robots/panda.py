@@ -49,6 +49,7 @@ DH = np.array([
 FLANGE_D = 0.107  # m, joint-7 frame to flange
 HAND_YAW = -np.pi / 4  # rad, Franka Hand mounting rotation about the flange axis
 GRIP_OFFSET = 0.1134  # m, flange to the fingertips' lower end (grip point), panda.xml site panda_grip
+FINGER_LENGTH = GRIP_OFFSET - 0.058  # m, grip point to the palm's underside (hand box bottom 0.058 from the flange)
 Q_LO = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
 Q_HI = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
 V_MAX = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s, rated joint velocity
@@ -155,6 +156,11 @@ class Panda(Robot):
                   + FINGER_JOINTS)
   nq = 9
   nu = 9
+  finger_length = FINGER_LENGTH
+  # At full action the hand covers only about half of the commanded 2 cm per control step in long moves
+  # (joint servos lag their IK targets; the gripper's slides cover nearly all of it), so tasks' default
+  # episodes are twice as long with the Panda.
+  episode_scale = 2.0
   default_mount = DEFAULT_MOUNT
 
   def __init__(self, m: mujoco.MjModel, control_dt: float):
