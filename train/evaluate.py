@@ -20,8 +20,10 @@ as :mod:`train.sweep` does — reuses the same executable. A policy with weights
 (``policy.apply(params, state, rng)`` and ``policy.params``, as
 :func:`train.load_policy` and :func:`parametrized_policy` give) gets them as a
 traced argument: new weights (training's periodic evaluation) reuse it too.
-Episodes are sharded over all local devices (1-D mesh,
-:class:`jax.sharding.NamedSharding`).
+Episodes are sharded over all devices (1-D mesh,
+:class:`jax.sharding.NamedSharding`): the local ones, or with several
+processes (:mod:`train.distributed`) every process's, each process passing
+the same keys.
 
 This module is the one place evaluation episodes are rolled out and
 summarised: the ``mjx-damage eval`` CLI (:mod:`apps.eval_cli`), :mod:`train.sweep`,
@@ -150,7 +152,7 @@ class Evaluator:
   and ``.params`` (:func:`parametrized_policy`, :func:`train.load_policy`) is
   run as ``apply`` with its weights passed in (``run(..., params=)`` swaps
   them); any other ``policy(state, rng)`` is closed over. ``devices``
-  (default: all local devices) shard the episode axis.
+  (default: all devices, ``jax.devices()``) shard the episode axis.
   """
 
   def __init__(self, env, policy: Policy, episode_length: int, devices: Optional[Sequence] = None):
@@ -171,8 +173,9 @@ class Evaluator:
       return run_episode(env, lambda state, rng: apply(params, state, rng), episode_length, key, fragility)
 
     batched = jax.vmap(one, in_axes=(None, 0, 0))
+    # Replicated out: every process (several hosts: train.distributed) reads all episodes' summaries.
     self._fn = jax.jit(batched, in_shardings=(self.replicated, self.sharding, self.sharding),
-                       out_shardings=self.sharding)
+                       out_shardings=self.replicated)
 
   @property
   def num_compiled(self) -> int:
