@@ -23,7 +23,9 @@ every process; this module holds what differs between them:
   wait in a collective the stopped one never joins).
 
 A process that dies is noticed by the coordination service after
-``--heartbeat-timeout`` seconds; it then terminates every other process with
+``--heartbeat-timeout`` seconds (one that fails with an error waits as long
+at exit for the others, which are stuck in a collective it left); it then
+terminates every other process with
 "Terminating process because the JAX distributed service detected fatal
 errors. This most likely indicates that another task died" (exit by
 SIGABRT). ``--coordinator auto``: JAX's cluster auto-detection (Slurm, Open
@@ -83,7 +85,7 @@ def add_arguments(p, devices_default: Optional[str] = None) -> None:
   p.add_argument("--dist-timeout", type=int, default=DEFAULT_TIMEOUT_S,
                  help="seconds to wait for every process to connect before giving up")
   p.add_argument("--heartbeat-timeout", type=int, default=DEFAULT_HEARTBEAT_S,
-                 help="seconds after which a silent process counts as dead and the others stop")
+                 help="seconds after which a process that died (or failed) ends the others")
 
 
 def parse_devices(text) -> Union[str, int, None]:
@@ -157,8 +159,10 @@ def initialize(setup: Setup, prog: str = "mjx-damage") -> None:
       coordinator_address=setup.coordinator, num_processes=setup.num_processes, process_id=setup.process_id)
   try:
     # JAX's own timeout a little later than ours: our line, not its abort, is what the user reads.
+    # shutdown timeout = heartbeat: a process that fails with an exception (alive, so still sending
+    # heartbeats) waits at exit for the others, stuck in a collective it never joins; they all end then.
     jax.distributed.initialize(**kwargs, initialization_timeout=setup.timeout + 30,
-                               heartbeat_timeout_seconds=setup.heartbeat)
+                               heartbeat_timeout_seconds=setup.heartbeat, shutdown_timeout_seconds=setup.heartbeat)
   except (ValueError, RuntimeError) as e:  # auto-detection found no cluster, or JAX already started
     watchdog.cancel()
     raise ValueError(f"--coordinator: {' '.join(str(e).split())}") from None
