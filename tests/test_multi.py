@@ -130,7 +130,7 @@ def test_two_process_sweep_equals_one_process(sweeps):
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def runs(tmp_path_factory):  # 3 CLI runs, each compiling (≈ 4 min on a quiet 2-core CPU): the slow suite
   """6 iterations on 1 process x 2 devices; 4 on 2 processes, then resumed by both to 6."""
   d = tmp_path_factory.mktemp("train")
   one, two = str(d / "one"), str(d / "two")
@@ -141,6 +141,7 @@ def runs(tmp_path_factory):
   return one, two, first, rows_before
 
 
+@pytest.mark.slow
 def test_two_process_training_matches_one_process(runs):
   one, two, first, rows_before = runs
   a, b = _rows(one), _rows(two)
@@ -150,7 +151,7 @@ def test_two_process_training_matches_one_process(runs):
     for k, v in ra.items():
       if k.startswith("loss/"):
         np.testing.assert_allclose(rb[k], v, rtol=LOSS_RTOL, atol=1e-7, err_msg=f"{k} at {ra['iteration']}")
-      elif k.startswith("eval/") or k.startswith("train/"):
+      elif (k.startswith("eval/") or k.startswith("train/")) and v is not None:
         assert rb[k] == pytest.approx(v, rel=1e-4, abs=1e-6), (k, ra["iteration"])
   meta = json.load(open(os.path.join(two, "config.json")))
   assert meta["processes"] == 2 and meta["devices"] == 2 and meta["mesh"] == {"seeds": 1, "envs": 2}
@@ -159,26 +160,28 @@ def test_two_process_training_matches_one_process(runs):
   assert summaries[0]["final_eval"] == summaries[1]["final_eval"]
 
 
-def test_a_dead_process_ends_the_other(tmp_path):
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("victim", [1, 0])  # a worker; the coordinator itself
+def test_a_dead_process_ends_the_other(victim, tmp_path):
+  """SIGKILL one process once both are connected (the others then compile, or wait in a collective):
+  the survivor ends with JAX's error within the heartbeat timeout + a margin, and does not hang."""
   procs = _launch(["train", "--task", TASK, *TINY, "--timesteps", "1e6", "--out", str(tmp_path / "run")], 2, 1)
   try:
-    metrics = tmp_path / "run" / "metrics.jsonl"
-    deadline = time.monotonic() + 400
-    while not metrics.exists():  # both processes are past compilation and in the loop
-      assert time.monotonic() < deadline and all(p.poll() is None for p in procs), \
-          [p.communicate()[1][-2000:] for p in procs if p.poll() is not None]
-      time.sleep(0.5)
-    procs[1].send_signal(signal.SIGKILL)
+    for p in procs:
+      for line in p.stdout:
+        if line.startswith("distributed: process"):
+          break
+    procs[victim].send_signal(signal.SIGKILL)
     t0 = time.monotonic()
-    _, err = procs[0].communicate(timeout=HEARTBEAT_S + 60)
+    survivor = procs[1 - victim]
+    _, err = survivor.communicate(timeout=HEARTBEAT_S + 60)
     waited = time.monotonic() - t0
   finally:
     for p in procs:
       if p.poll() is None:
         p.kill()
-  assert procs[0].returncode != 0
-  assert waited < HEARTBEAT_S + 60
-  assert "another task died" in err or "heartbeat" in err, err[-3000:]
+  assert survivor.returncode != 0 and waited < HEARTBEAT_S + 60
+  assert "another task died" in err or "heartbeat" in err.lower(), err[-3000:]
 
 
 # --- bad flags --------------------------------------------------------------------------------------------------
@@ -213,3 +216,22 @@ def test_more_devices_than_exist_and_no_coordinator(tmp_path):
   assert p.returncode == 2, p.stderr[-2000:]
   assert "error: --coordinator: could not reach the coordinator" in p.stderr
   assert time.monotonic() - t0 < 120
+
+
+@pytest.mark.slow
+def test_multi_gpu_benchmark_runs_on_two_cpu_devices(tmp_path):
+  """benchmarks/multi_gpu.py end to end at toy size (the numbers mean nothing on CPU)."""
+  config = {"unroll_length": 8, "num_minibatches": 2, "batch_size": 4, "num_updates_per_batch": 2,
+            "episode_length": 24, "policy_hidden_sizes": [16, 16], "value_hidden_sizes": [16, 16], "num_eval_envs": 8}
+  p = subprocess.run([sys.executable, "benchmarks/multi_gpu.py", "--task", TASK, "--devices", "1,2",
+                      "--envs-per-device", "8", "--eval-episodes-per-device", "4", "--fragility", "1,2",
+                      "--train-seconds", "20", "--eval-every", "256", "--config", json.dumps(config),
+                      "--results-dir", str(tmp_path)], cwd=ROOT, env=_env(2), capture_output=True, text=True,
+                     timeout=1500)
+  assert p.returncode == 0, p.stderr[-3000:]
+  res = json.load(open(tmp_path / "multi_gpu_cpu.json"))
+  assert [r["devices"] for r in res["rows"]] == [1, 2]
+  for r in res["rows"]:
+    assert len(r["train"]["env_steps_per_s"]["runs"]) == 2 and len(r["eval"]["env_steps_per_s"]["runs"]) == 2
+    assert r["train"]["config"]["num_envs"] == 8 * r["devices"] and r["train"]["curve"]
+  assert (tmp_path / "multi_gpu_cpu.md").exists() and (tmp_path / "multi_gpu_cpu_curves.png").exists()
