@@ -6,10 +6,12 @@ minibatch size times D as the global ``batch_size``, so each device's share
 of a minibatch stays the same; ``--eval-episodes-per-device`` × levels
 evaluation episodes):
 
-* training — ``--repeats`` runs of ``train.train(task, devices=D, seeds=...)``
-  stopped by ``--train-seconds`` (compile excluded from the rate: TrainResult
-  .throughput counts the iterations after the first); the first run's
-  periodic evaluations are the learning curve (same seeds for every D);
+* training — ``--repeats`` runs of ``--iterations`` iterations of
+  ``train.train(task, devices=D, seeds=...)`` (compile excluded from the
+  rate: TrainResult.throughput counts the iterations after the first, and
+  evaluation time is not in it); the first run's ``--eval-points``
+  deterministic evaluations are the learning curve (same seeds for every D;
+  D devices see D times the env steps per iteration);
 * evaluation — one :class:`train.evaluate.Evaluator` over D devices, the
   sweep's batch (fragility levels × episodes, train.sweep's layout), timed
   over ``--repeats`` calls after a warm-up call: env-steps/s = episodes ×
@@ -20,13 +22,18 @@ repeat, mean, min–max spread, speedup over 1 device) and ``_curves.png``.
 
 GPU (one node with 2 GPUs; the device tool's ``nvidia-h200-x2``), one command::
 
-    python benchmarks/multi_gpu.py --task place_plate --devices 1,2 --repeats 2 --train-seconds 90
+    python benchmarks/multi_gpu.py --task place_plate --devices 1,2 --repeats 2 --iterations 40
+
+or one device count per call (each call under a time limit), the second adding its rows to the file::
+
+    python benchmarks/multi_gpu.py --task place_plate --devices 1 --repeats 2 --iterations 40
+    python benchmarks/multi_gpu.py --task place_plate --devices 2 --repeats 2 --iterations 40 --append
 
 CPU plumbing check with 2 fake host devices (measures nothing about GPUs)::
 
     XLA_FLAGS=--xla_force_host_platform_device_count=2 python benchmarks/multi_gpu.py \\
         --task train.experiments.pusher:PusherEnv --devices 1,2 --envs-per-device 8 --eval-episodes-per-device 4 \\
-        --train-seconds 20 --eval-every 512 --config '{"unroll_length": 8, "num_minibatches": 2, "batch_size": 4,
+        --iterations 4 --eval-points 2 --config '{"unroll_length": 8, "num_minibatches": 2, "batch_size": 4,
         "num_updates_per_batch": 2, "episode_length": 24, "policy_hidden_sizes": [16, 16],
         "value_hidden_sizes": [16, 16], "num_eval_envs": 8}' --results-dir /tmp/multi_gpu
 """
@@ -59,15 +66,18 @@ def parse(argv=None):
                  "batch_size is per device and multiplied by D)")
   p.add_argument("--seeds", default="0", help="comma-separated seeds, the same for every D")
   p.add_argument("--repeats", type=int, default=2)
-  p.add_argument("--train-seconds", type=float, default=90.0, help="training wall clock per run, compile incl.")
-  p.add_argument("--eval-every", type=int, default=1_000_000, help="env steps per seed between curve points")
+  p.add_argument("--iterations", type=int, default=40, help="training iterations per run (>= 3: the first compiles)")
+  p.add_argument("--eval-points", type=int, default=8, help="deterministic evaluations per run (the curve)")
   p.add_argument("--eval-episodes-per-device", type=int, default=256)
   p.add_argument("--fragility", default="0.5,1,2,4", help="sweep levels of the evaluation batch")
   p.add_argument("--policy", default="random", help="evaluation policy spec (apps.resolve)")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  p.add_argument("--append", action="store_true", help="keep the other device counts' rows of an earlier results file")
   args = p.parse_args(argv)
   if args.repeats < 2:
     p.error("--repeats: at least 2 (the spread over repeats is reported)")
+  if args.iterations < 3 or args.eval_points < 1:
+    p.error("--iterations: at least 3; --eval-points: at least 1")
   try:
     args.config = json.loads(args.config)
     assert isinstance(args.config, dict)
@@ -101,13 +111,14 @@ def train_runs(args, d: int) -> dict:
   per_dev_envs = args.envs_per_device or base.num_envs
   cfg = dict(args.config)
   per_dev_batch = cfg.pop("batch_size", base.batch_size)
-  sizes = dict(num_envs=per_dev_envs * d, eval_every=args.eval_every, num_timesteps=10**12, **cfg)
+  sizes = dict(num_envs=per_dev_envs * d, **cfg)
   if per_dev_batch is not None:
     sizes["batch_size"] = per_dev_batch * d
+  spi = PPOConfig.preset(args.preset, **sizes).steps_per_iteration
+  sizes.update(num_timesteps=args.iterations * spi, eval_every=spi * max(1, args.iterations // args.eval_points))
   rates, curve, res = [], None, None
   for r in range(args.repeats):
-    res = train(args.task, preset=args.preset, seeds=args.seeds, devices=d, progress=False, plot=False,
-                time_limit=args.train_seconds, **sizes)
+    res = train(args.task, preset=args.preset, seeds=args.seeds, devices=d, progress=False, plot=False, **sizes)
     rates.append(res.throughput)
     if curve is None:
       curve = [{k: row[k] for k in ("seed", "iteration", "env_steps", "wall_time") + CURVE_KEYS if k in row}
@@ -155,8 +166,9 @@ def write(base: str, payload: dict) -> None:
     speed = f" | {s['mean'] / one[part]['env_steps_per_s']['mean']:.2f}x" if one else " | –"
     return f"{s['mean']:,.0f} ({s['min']:,.0f}–{s['max']:,.0f}){speed}"
 
+  commands = "; ".join(f"`{c}`" for c in dict.fromkeys(r["command"] for r in rows))
   lines = [f"# Scaling over devices: {payload['device']}", "",
-           f"Command: `{payload['command']}`", "", f"jax {payload['jax']}, {payload['date']}; task {payload['task']}; "
+           f"Command(s): {commands}", "", f"jax {payload['jax']}, {payload['date']}; task {payload['task']}; "
            f"rates are mean (min–max) over {payload['repeats']} repeats; speedup vs 1 device at the same per-device batch.",
            "", "| Devices | Train envs (global) | Train env-steps/s | Speedup | Eval episodes | Eval env-steps/s | Speedup |",
            "|---:|---:|---:|---:|---:|---:|---:|"]
@@ -206,9 +218,13 @@ def main(argv=None) -> int:
   base = os.path.join(args.results_dir, f"multi_gpu_{slug}")
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/multi_gpu.py"] + list(sys.argv[1:] if argv is None else argv))
   payload = {"device": device, "jax": jax.__version__, "task": args.task, "repeats": args.repeats,
-             "command": command, "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
+             "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
+  if args.append and os.path.exists(base + ".json"):
+    with open(base + ".json") as f:
+      payload["rows"] = [r for r in json.load(f)["rows"] if r["devices"] not in counts]
   for d in counts:
-    payload["rows"].append({"devices": d, "eval": eval_runs(args, d), "train": train_runs(args, d)})
+    payload["rows"].append({"devices": d, "command": command, "eval": eval_runs(args, d), "train": train_runs(args, d)})
+    payload["rows"].sort(key=lambda r: r["devices"])
     write(base, payload)  # after every device count: a timeout keeps the finished ones
   print(f"wrote {base}.md / .json / _curves.png", flush=True)
   return 0
