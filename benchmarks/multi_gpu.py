@@ -24,10 +24,10 @@ GPU (one node with 2 GPUs; the device tool's ``nvidia-h200-x2``), one command::
 
     python benchmarks/multi_gpu.py --task place_plate --devices 1,2 --repeats 2 --iterations 40
 
-or one device count per call (each call under a time limit), the second adding its rows to the file::
+or one device count per call (each call under a time limit), the second adding its rows to the first's file::
 
-    python benchmarks/multi_gpu.py --task place_plate --devices 1 --repeats 2 --iterations 40
-    python benchmarks/multi_gpu.py --task place_plate --devices 2 --repeats 2 --iterations 40 --append
+    python benchmarks/multi_gpu.py --task place_plate --devices 1 --repeats 2 --iterations 40 --results-dir /tmp/mg
+    python benchmarks/multi_gpu.py --task place_plate --devices 2 --repeats 2 --iterations 40 --results-dir /tmp/mg --append
 
 CPU plumbing check with 2 fake host devices (measures nothing about GPUs)::
 
