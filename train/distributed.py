@@ -81,7 +81,8 @@ def add_arguments(p, devices_default: Optional[str] = None) -> None:
                  help="process 0's address: start one process per host with the same value; "
                       "auto: JAX's cluster detection (Slurm, Open MPI, ...) (default: one process)")
   p.add_argument("--num-processes", type=int, default=None, help="processes in the run (with --coordinator HOST:PORT)")
-  p.add_argument("--process-id", type=int, default=None, help="this process, 0 .. num-processes-1 (0 writes the outputs)")
+  p.add_argument("--process-id", type=int, default=None,
+                 help="this process, 0 .. num-processes-1 (0 writes the outputs)")
   p.add_argument("--dist-timeout", type=int, default=DEFAULT_TIMEOUT_S,
                  help="seconds to wait for every process to connect before giving up")
   p.add_argument("--heartbeat-timeout", type=int, default=DEFAULT_HEARTBEAT_S,

@@ -254,7 +254,8 @@ class Trainer:
                     iteration=ts.iteration + 1)
     metrics = {f"ended_{k}": v for k, v in ended.items()}
     metrics.update({("sgd_steps" if k == "sgd_steps" else f"loss/{k}"): v for k, v in loss_metrics.items()})
-    metrics.update(step_reward=self._pmean(jnp.mean(data.reward)), step_cost=self._pmean(jnp.mean(cost)), lagrange=mult.lam,
+    metrics.update(step_reward=self._pmean(jnp.mean(data.reward)), step_cost=self._pmean(jnp.mean(cost)),
+                   lagrange=mult.lam,
                    cost_estimate=cost_estimate)
     return ts, metrics
 

@@ -215,7 +215,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     t0 = time.perf_counter()
     host = distributed.to_host(ts)  # every process takes part; process 0 writes
     if main:
-      ckpt.save(ckpt_path, host, trainer.inference_params(host), dict(meta, iteration=iteration, env_steps=iteration * spi))
+      ckpt.save(ckpt_path, host, trainer.inference_params(host),
+                dict(meta, iteration=iteration, env_steps=iteration * spi))
     timings["checkpoint"] += time.perf_counter() - t0
 
   n_iter = cfg.num_iterations
