@@ -2,6 +2,10 @@
 
     mjx-damage sweep --tasks place_plate --policies scripted:safe,scripted:unsafe \
         --seeds 0,1,2 --fragility 0.5,1,2,4 --episodes 64 --out sweep.json
+
+Episodes are sharded over ``--devices`` (default: all local devices); with
+``--coordinator`` over every process's devices, the same command on each
+process, and process 0 writes --out (:mod:`train.distributed`).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import jax
 from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json, write_text
+from train import distributed
 from train import sweep as S
 from train.cliargs import Parser, heartbeat, say_compiling
 
@@ -44,6 +49,7 @@ def build_parser() -> Parser:
   ap.add_argument("--out", default=None, help="JSON path; the markdown table goes beside it (.md) "
                   "(default: runs/sweep-<tasks>-<time>/sweep.json, a new folder)")
   ap.add_argument("--overwrite", action="store_true", help="replace an existing --out (and its .md)")
+  distributed.add_arguments(ap, devices_default="all")
   return ap
 
 
@@ -52,6 +58,8 @@ def main(argv=None) -> int:
   ap = build_parser()
   args = ap.parse_args(argv)
   try:
+    setup = distributed.check(args.devices, args.coordinator, args.num_processes, args.process_id,
+                              args.dist_timeout, args.heartbeat_timeout)
     tasks = _split("tasks", args.tasks)
     policies = _split("policies", args.policies)
     try:
@@ -72,15 +80,23 @@ def main(argv=None) -> int:
       R.parse_policy_spec(p)
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
-    if args.out is not None:
+    if setup.multi_process and args.out is None:
+      raise ValueError("--out: several processes need one --out, the same on every process")
+    if args.out is not None and setup.process_id in (None, 0):
       outputs.check_new([args.out, os.path.splitext(args.out)[0] + ".md"], "--out", args.overwrite)
   except ValueError as e:
     ap.error(str(e))
+  try:
+    distributed.initialize(setup, ap.prog)
+    devices = distributed.select_devices(setup.devices)
+  except ValueError as e:
+    ap.error(str(e))
+  main_process = distributed.is_main()
   out_path = args.out or os.path.join(outputs.run_dir("sweep", "+".join(tasks)), "sweep.json")
   md_path = os.path.splitext(out_path)[0] + ".md"
   platform = jax.default_backend()
   print(f"sweep: tasks {', '.join(tasks)} x policies {', '.join(policies)} x seeds {seeds} x fragility {levels}, "
-        f"{args.episodes} episodes each, backend {args.backend}, device {platform} x {jax.device_count()}; "
+        f"{args.episodes} episodes each, backend {args.backend}, device {platform} x {len(devices)}; "
         f"outputs {out_path}, {md_path}",
         flush=True)
   say_compiling(COMPILE_S, platform, "per task and policy the first time")
@@ -91,15 +107,17 @@ def main(argv=None) -> int:
         "command": "mjx-damage sweep " + " ".join(argv),
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
-        "num_devices": jax.device_count(),  # evaluation shards episodes over all of them
+        "num_devices": len(devices), "processes": jax.process_count(),  # episodes are sharded over them
         "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
         "episodes": args.episodes, "safe_threshold": args.safe_threshold, "backend": args.backend,
         "executables_compiled": res["compiles"],
         "wall_s": time.perf_counter() - t0, "complete": complete,
         "rows": res["rows"], "runs": res["runs"],
     }
-    write_json(out_path, out, indent=1)
     md = S.markdown(res["rows"], args.safe_threshold)
+    if not main_process:
+      return md
+    write_json(out_path, out, indent=1)
     head = f"Command: `{out['command']}`\n\nDevice: {out['device']} x {out['num_devices']}; wall {out['wall_s']:.0f} s"
     write_text(md_path, head + ("" if complete else " (incomplete: interrupted)") + "\n\n" + md)
     return md
@@ -111,8 +129,8 @@ def main(argv=None) -> int:
 
   with heartbeat("sweep"):
     res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
-                  on_progress=lambda r: write(r, False), make_env=make_env, make_policy=R.make_policy,
-                  episode_length_of=R.episode_length_of,
+                  devices=devices, on_progress=lambda r: write(r, False), make_env=make_env,
+                  make_policy=R.make_policy, episode_length_of=R.episode_length_of,
                   describe_program=lambda task, spec: R.program_description("sweep", task, spec, backend=args.backend),
                   program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))

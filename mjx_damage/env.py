@@ -31,7 +31,9 @@ class DamageEnv(Env):
     if not isinstance(n_substeps, int) or n_substeps < 1:
       raise ValueError(f"n_substeps: must be a positive int, got {n_substeps!r}")
     self.mj_model = mj_model
-    self.sys = mjx.put_model(mj_model)
+    # This process's device: MJX's default, jax.devices()[0], belongs to process 0 when several processes
+    # share a run (train.distributed), and a model there cannot be read by the others.
+    self.sys = mjx.put_model(mj_model, device=jax.local_devices()[0])
     self.damage_binding = bind(mj_model, damage_config)
     self.n_substeps = n_substeps
 

@@ -6,6 +6,8 @@ Examples::
     mjx-damage train --task place_plate --budget 2 --multiplier pid --out runs/pp_pid   # PID-Lagrangian, ĉ = 2
     mjx-damage train --task place_plate --preset paper --damage-weight 2 --out runs/pp_paper
     mjx-damage train --task place_plate --budget 2 --out runs/pp_lag --resume   # continue after an interruption
+    mjx-damage train --task place_plate --devices all --num-envs 4096 --out runs/pp_2gpu   # every local GPU
+    mjx-damage train --task place_plate --coordinator 10.0.0.1:4321 --num-processes 2 --process-id 0 --out runs/pp
 
 Every setting left out comes from ``--preset`` (playground: MuJoCo Playground's
 PandaPickCube recipe; paper: the oopsieverse appendix; legacy: this trainer's
@@ -15,6 +17,12 @@ shrunk to CPU_SIZE. Ctrl-C / SIGTERM writes a checkpoint and exits with
 status 130; ``--resume`` continues it exactly. An existing --out is refused
 unless --resume or --overwrite; without --out the run goes to a new
 runs/train-<task>-<time>/.
+
+Several devices / processes (train.mesh, train.distributed): ``--devices
+all|N`` lays the seeds and each seed's envs (--num-envs is the global count)
+across N devices; with ``--coordinator`` the same command runs once per
+process (host), only process 0 writes --out (give every process the same
+--out; --resume reads it on every process: a shared filesystem, or a copy).
 """
 
 from __future__ import annotations
@@ -28,6 +36,8 @@ import sys
 
 from mjx_damage import outputs
 from train import checkpoint as ckpt
+from train import distributed
+from train import mesh as M
 from train.cliargs import Parser, heartbeat, say_compiling
 from train.config import MULTIPLIERS, PRESETS, PPOConfig
 
@@ -140,6 +150,7 @@ def build_parser() -> Parser:
   p.add_argument("--init-from", dest="init_from", default=None, metavar="RUN",
                  help="start every seed's actor and normaliser from this checkpoint (mjx-damage bc, or a train "
                       "run); the critic starts fresh (default: none)")
+  distributed.add_arguments(p)
   for flag, dest, typ, help_ in CONFIG_FLAGS:
     # default None = the preset's value, spelled out per preset (the formatter would only say None)
     text = ((help_ + " ") if help_ else "") + _preset_defaults(dest)
@@ -208,11 +219,35 @@ def cpu_size(config: dict, preset: str) -> dict:
   return {**CPU_SIZE, **(CPU_SIZE_BATCHED if PRESETS[preset].get("batch_size") is not None else {})}
 
 
+DIST_FLAGS = ("devices", "coordinator", "num_processes", "process_id", "dist_timeout", "heartbeat_timeout")
+
+
+def _error(prog: str, e: Exception) -> int:
+  """One line, status 2, as argparse's own errors (returned: callers test the status)."""
+  print(f"{prog}: error: {' '.join(str(e).split())}", file=sys.stderr)
+  return 2
+
+
+def check_out_everywhere(out_dir: str, task: str, resume: bool, overwrite: bool) -> None:
+  """:func:`check_out` with several processes: process 0 judges --out (the others may share its filesystem
+  and see the folder it creates); each process checks the checkpoint it will read; all agree to go on."""
+  err = None
+  try:
+    if distributed.is_main() or resume:
+      check_out(out_dir, task, resume, overwrite and distributed.is_main())
+  except ValueError as e:
+    err = e
+  if distributed.any_process(err is not None)[0]:
+    raise err or ValueError(f"--out: another process rejected {out_dir} (see its error)")
+
+
 def main(argv=None) -> int:
   p = build_parser()
   args, config = split_args(vars(p.parse_args(argv)))
   task, overwrite = args.pop("task"), args.pop("overwrite")
+  dist = {k: args.pop(k) for k in DIST_FLAGS}
   try:  # everything the user typed is checked here, before JAX starts
+    setup = distributed.check(**dist)
     args["task_kwargs"] = _task_kwargs(args.pop("task_arg")) or None
     check_task(task)
     if args["init_from"] is not None and not os.path.exists(args["init_from"]):
@@ -226,42 +261,55 @@ def main(argv=None) -> int:
     seeds = args["seeds"] or ((args["seed"],) if args["seed"] is not None else (0,))
     cfg = PPOConfig.preset(args["preset"], seeds=seeds, episode_length=args["episode_length"] or 1,
                            **config).validate()
+    if isinstance(setup.device_spec, int):
+      M.check_layout(cfg, setup.device_spec)
     if args["out_dir"] is None:
       if args["resume"]:
         raise ValueError("--resume: needs --out (the run directory to continue)")
+      if setup.multi_process:
+        raise ValueError("--out: several processes need one --out, the same on every process")
       args["out_dir"] = outputs.run_dir("train", task.rpartition(":")[2] or task)
-    check_out(args["out_dir"], task, args["resume"], overwrite)
-  except ValueError as e:  # one line, status 2, as argparse's own errors (returned: callers test the status)
-    print(f"{p.prog}: error: {' '.join(str(e).split())}", file=sys.stderr)
-    return 2
+    if not setup.multi_process:
+      check_out(args["out_dir"], task, args["resume"], overwrite)
+  except ValueError as e:
+    return _error(p.prog, e)
 
   import jax  # after the checks: keeps --help and user errors fast
 
   from train.ppo import train
-  platform = jax.default_backend()
-  small = cpu_size(config, args["preset"]) if platform == "cpu" else {}
-  if small:
-    config.update(small)
-    cfg = dataclasses.replace(cfg, **small).validate()
-  if overwrite:
+  try:  # connects the processes (bounded wait), then what needs the devices; still nothing compiled
+    distributed.initialize(setup, p.prog)
+    if setup.multi_process:
+      check_out_everywhere(args["out_dir"], task, args["resume"], overwrite)
+    devices = distributed.select_devices(setup.device_spec)
+    platform = jax.default_backend()
+    small = cpu_size(config, args["preset"]) if platform == "cpu" else {}
+    if small:
+      config.update(small)
+      cfg = dataclasses.replace(cfg, **small).validate()
+    M.check_layout(cfg, len(devices))
+  except ValueError as e:
+    return _error(p.prog, e)
+  if overwrite and distributed.is_main():
     for name in RUN_FILES:  # only the files a run writes: --out may be a folder with other things in it
       path = os.path.join(args["out_dir"], name)
       if os.path.isfile(path):
         os.remove(path)
   size = (" (no accelerator: CPU size; give --num-envs/--timesteps for more)" if small else "")
   print(f"train: task {task}, preset {args['preset']}, {cfg.num_envs} envs x {cfg.num_timesteps:,} env steps "
-        f"per seed{size}, seeds {list(cfg.seeds)}, device {platform} x {jax.device_count()}; "
+        f"per seed{size}, seeds {list(cfg.seeds)}, device {platform} x {len(devices)} (mesh seeds x envs "
+        f"{M.shape(len(devices), cfg.num_seeds)}, {jax.process_count()} process(es)); "
         f"run directory {args['out_dir']}{' (resuming)' if args['resume'] else ''}", flush=True)
   say_compiling(COMPILE_S, platform, default=90)
   try:
     with heartbeat("train", every=30.0):
-      result = train(task, **args, **config)
+      result = train(task, devices=devices, **args, **config)
   except ValueError as e:
-    print(f"mjx-damage train: error: {' '.join(str(e).split())}", file=sys.stderr)
-    return 2
+    return _error(p.prog, e)
   summary = {
       "out_dir": result.out_dir, "seeds": list(result.config.seeds), "env_steps_per_seed": result.env_steps,
       "wall_time_s": round(result.wall_time, 1), "train_throughput_steps_per_s": round(result.throughput, 1),
+      "devices": result.devices, "process": jax.process_index(),
       "final_eval": {str(s): ev for s, ev in zip(result.config.seeds, result.final_evals)},
   }
   print(json.dumps(summary, indent=1))

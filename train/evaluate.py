@@ -20,8 +20,10 @@ as :mod:`train.sweep` does — reuses the same executable. A policy with weights
 (``policy.apply(params, state, rng)`` and ``policy.params``, as
 :func:`train.load_policy` and :func:`parametrized_policy` give) gets them as a
 traced argument: new weights (training's periodic evaluation) reuse it too.
-Episodes are sharded over all local devices (1-D mesh,
-:class:`jax.sharding.NamedSharding`).
+Episodes are sharded over all devices (1-D mesh,
+:class:`jax.sharding.NamedSharding`): the local ones, or with several
+processes (:mod:`train.distributed`) every process's, each process passing
+the same keys.
 
 This module is the one place evaluation episodes are rolled out and
 summarised: the ``mjx-damage eval`` CLI (:mod:`apps.eval_cli`), :mod:`train.sweep`,
@@ -153,7 +155,7 @@ class Evaluator:
   and ``.params`` (:func:`parametrized_policy`, :func:`train.load_policy`) is
   run as ``apply`` with its weights passed in (``run(..., params=)`` swaps
   them); any other ``policy(state, rng)`` is closed over. ``devices``
-  (default: all local devices) shard the episode axis.
+  (default: all devices, ``jax.devices()``) shard the episode axis.
 
   ``program``: a JSON-able description that names *everything* the rolled-out
   function depends on (task and its overrides, policy spec, checkpoint config …;
@@ -182,8 +184,9 @@ class Evaluator:
       return run_episode(env, lambda state, rng: apply(params, state, rng), episode_length, key, fragility)
 
     batched = jax.vmap(one, in_axes=(None, 0, 0))
+    # Replicated out: every process (several hosts: train.distributed) reads all episodes' summaries.
     self._fn = jax.jit(batched, in_shardings=(self.replicated, self.sharding, self.sharding),
-                       out_shardings=self.sharding)
+                       out_shardings=self.replicated)
     self.program = None if program is None else dict(program, episode_length=episode_length,
                                                          devices=len(self.devices))
     self.program_roots = tuple(program_roots)

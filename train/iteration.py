@@ -27,14 +27,20 @@ limit is never learnt as a terminal state. The tasks used for RL never set
 ``done`` themselves (no success or destruction termination), so every episode
 end is a truncation.
 
-Shapes: E = num_envs, T = unroll_length, R = num_rollouts, O = observation
+Several devices (train.mesh): with ``axis_name`` the function runs inside
+``shard_map`` on one shard of the env batch; the episode sums are summed, the
+gradients, normaliser statistics and loss metrics averaged over that axis (so
+every shard keeps the same weights), and the sampling/shuffling keys are
+folded with the shard index. ``axis_name=None``: one device, no collectives.
+
+Shapes: E = num_envs (on one shard: num_envs / shards), T = unroll_length, R = num_rollouts, O = observation
 size, A = action size, N = tracked entities.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import Any, Optional
 
 import flax
 import jax
@@ -96,8 +102,10 @@ def shape_reward(r_task, cost, damage_weight, lam):
 class Trainer:
   """The static parts of a run (envs, networks, optimizer); every method is a pure function."""
 
-  def __init__(self, env: Env, cfg: PPOConfig):
+  def __init__(self, env: Env, cfg: PPOConfig, axis_name: Optional[str] = None):
+    """``axis_name``: the mesh axis the env batch is split over (train.mesh); None on one shard."""
     self.cfg = cfg.validate()
+    self.axis_name = axis_name
     self.base_env = env
     self.safe_threshold = safe_threshold_of(env)
     episodic = brax_training.EpisodeWrapper(env, cfg.episode_length, action_repeat=1)
@@ -113,7 +121,18 @@ class Trainer:
     self.network = N.make_networks(self.obs_size, self.action_size, cfg)
     self.make_policy = ppo_networks.make_inference_fn(self.network)
     self.optimizer = N.make_optimizer(cfg)
-    self.gradient_update = N.make_gradient_update(self.network, self.optimizer, cfg)
+    self.gradient_update = N.make_gradient_update(self.network, self.optimizer, cfg, axis_name)
+
+  # -- across env shards (identities when axis_name is None) -----------------
+  def _local(self, key):
+    """A key of this env shard's own: envs on different shards must not share sampling noise."""
+    return key if self.axis_name is None else jax.random.fold_in(key, jax.lax.axis_index(self.axis_name))
+
+  def _psum(self, tree):
+    return tree if self.axis_name is None else jax.lax.psum(tree, self.axis_name)
+
+  def _pmean(self, tree):
+    return tree if self.axis_name is None else jax.lax.pmean(tree, self.axis_name)
 
   # -- init -----------------------------------------------------------------
   def init_state(self, seed) -> TrainState:
@@ -181,12 +200,12 @@ class Trainer:
     key, k_unroll = jax.random.split(ts.rng)
     policy = self.make_policy((ts.normalizer, ts.params.policy))
     step = functools.partial(self._env_step, policy)
-    keys = jax.random.split(k_unroll, (self.cfg.num_rollouts, self.cfg.unroll_length))
+    keys = jax.random.split(self._local(k_unroll), (self.cfg.num_rollouts, self.cfg.unroll_length))
     (env_state, acc), (data, ended) = jax.lax.scan(
         lambda carry, k: jax.lax.scan(step, carry, k), (ts.env_state, ts.episode), keys)
     # [R, T, E, ...] → [R, E, T, ...] → [R·E, T, ...]: sequences first, as the loss expects.
     data = jax.tree.map(lambda x: jnp.swapaxes(x, 1, 2).reshape((-1,) + x.shape[1:2] + x.shape[3:]), data)
-    return ts.replace(env_state=env_state, episode=acc, rng=key), data, jax.tree.map(jnp.sum, ended)
+    return ts.replace(env_state=env_state, episode=acc, rng=key), data, self._psum(jax.tree.map(jnp.sum, ended))
 
   # -- learning -------------------------------------------------------------
   def _minibatch(self, normalizer, carry, inp):
@@ -194,7 +213,7 @@ class Trainer:
     params, opt_state, stopped = carry
     mb, key = inp
     (_, metrics), new_params, new_opt = self.gradient_update(params, normalizer, mb, key, optimizer_state=opt_state)
-    metrics = {k: metrics[k] for k in LOSS_KEYS}
+    metrics = self._pmean({k: metrics[k] for k in LOSS_KEYS})  # one KL on every shard: they stop together
     if self.cfg.target_kl is None:
       return (new_params, new_opt, stopped), (metrics, jnp.ones(()))
     stop = stopped | (metrics["kl_mean"] > 1.5 * self.cfg.target_kl)
@@ -213,11 +232,11 @@ class Trainer:
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
     if self.cfg.normalize_observations:
-      normalizer = running_statistics.update(normalizer, data.observation)
+      normalizer = running_statistics.update(normalizer, data.observation, pmap_axis_name=self.axis_name)
     (params, opt_state, _), (metrics, taken) = jax.lax.scan(
         functools.partial(self._epoch, normalizer, data),
         (ts.params, ts.opt_state, jnp.zeros((), bool)),
-        jax.random.split(k_sgd, self.cfg.num_updates_per_batch))
+        jax.random.split(self._local(k_sgd), self.cfg.num_updates_per_batch))
     metrics = {k: jnp.sum(v * taken) / jnp.maximum(jnp.sum(taken), 1.0) for k, v in metrics.items()}
     metrics["sgd_steps"] = jnp.sum(taken)
     if self.cfg.critic_warmup_iterations:
@@ -248,15 +267,17 @@ class Trainer:
                     iteration=ts.iteration + 1)
     metrics = {f"ended_{k}": v for k, v in ended.items()}
     metrics.update({("sgd_steps" if k == "sgd_steps" else f"loss/{k}"): v for k, v in loss_metrics.items()})
-    metrics.update(step_reward=jnp.mean(data.reward), step_cost=jnp.mean(cost), lagrange=mult.lam,
+    metrics.update(step_reward=self._pmean(jnp.mean(data.reward)), step_cost=self._pmean(jnp.mean(cost)),
+                   lagrange=mult.lam,
                    cost_estimate=cost_estimate)
     return ts, metrics
 
   # -- evaluation (train.evaluate owns the rollout) --------------------------
-  def make_evaluator(self) -> "E.Evaluator":
-    """The deterministic policy's Evaluator on ``base_env``; weights are passed as data per call."""
+  def make_evaluator(self, devices=None) -> "E.Evaluator":
+    """The deterministic policy's Evaluator on ``base_env`` (episodes sharded over ``devices``, default all);
+    weights are passed as data per call."""
     apply = N.policy_apply(self.make_policy, deterministic=True)
-    return E.Evaluator(self.base_env, E.parametrized_policy(apply, None), self.cfg.episode_length)
+    return E.Evaluator(self.base_env, E.parametrized_policy(apply, None), self.cfg.episode_length, devices)
 
   def evaluate(self, evaluator: "E.Evaluator", inference_params, key, num_episodes: int) -> dict:
     """``num_episodes`` deterministic episodes of one seed's policy → train.evaluate's flat summary."""

@@ -16,7 +16,7 @@ become state-dependent as it learns.
 from __future__ import annotations
 
 import functools
-from typing import Callable
+from typing import Callable, Optional
 
 import jax
 import jax.numpy as jnp
@@ -101,8 +101,11 @@ def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
   return optax.multi_transform({"policy": one(), "value": one()}, labels)
 
 
-def make_gradient_update(network, optimizer, cfg: PPOConfig):
-  """``update(params, normalizer, minibatch [B, T], key, optimizer_state=...) -> ((loss, metrics), params, opt_state)``."""
+def make_gradient_update(network, optimizer, cfg: PPOConfig, axis_name: Optional[str] = None):
+  """``update(params, normalizer, minibatch [B, T], key, optimizer_state=...) -> ((loss, metrics), params, opt_state)``.
+
+  ``axis_name``: gradients are averaged over this mesh axis (train.mesh) before the optimizer step.
+  """
   loss_fn = functools.partial(
       ppo_losses.compute_ppo_loss,
       ppo_network=network,
@@ -114,7 +117,7 @@ def make_gradient_update(network, optimizer, cfg: PPOConfig):
       normalize_advantage=True,
       vf_coefficient=cfg.value_cost,
   )
-  return gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=None, has_aux=True)
+  return gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=axis_name, has_aux=True)
 
 
 def policy_apply(make_policy, deterministic: bool):

@@ -16,7 +16,10 @@ The pieces live in one module per concept:
   seeds, no per-seed host work), per-seed metrics rows (``seed`` key) and
   evaluations, one checkpoint with all seeds, SIGINT/SIGTERM → checkpoint and
   exit 130;
-* :mod:`train.policy` — :func:`load_policy` (``seed=`` picks one seed of a run).
+* :mod:`train.policy` — :func:`load_policy` (``seed=`` picks one seed of a run);
+* :mod:`train.mesh` — the seeds × envs device mesh the iteration runs on
+  (``devices=``), :mod:`train.distributed` — several processes (only process
+  0 writes files; every process calls the same collectives in the same order).
 """
 
 from __future__ import annotations
@@ -37,6 +40,8 @@ import numpy as np
 from mjx_damage import io
 from train import checkpoint as ckpt
 from train import memory as MEM
+from train import distributed
+from train import mesh as M
 from train.config import RESUMABLE_CHANGES, PPOConfig
 from train.envs import resolve_task, safe_threshold_of, task_episode_length  # noqa: F401  (public here too)
 from train.iteration import Trainer, TrainState, shape_reward  # noqa: F401
@@ -62,8 +67,9 @@ class TrainResult:
   history: list  # the rows of metrics.jsonl (one per seed per evaluation, with "seed")
   timings: dict  # s: compile, eval_compile, iterations, eval, checkpoint, host
   policy: Callable  # the first seed's deterministic policy(state, rng) -> action for ONE env
-  train_state: TrainState  # leading seed axis S on every leaf
+  train_state: TrainState  # leading seed axis S on every leaf (global arrays laid out on the mesh)
   stopped_early: bool = False
+  devices: int = 1  # devices of the mesh (all processes)
 
   def seed_state(self, i: int = 0) -> TrainState:
     return jax.tree.map(lambda x: x[i], self.train_state)
@@ -109,14 +115,14 @@ class _StopFlag:
       signal.signal(s, h)
 
 
-def check_memory(trainer: Trainer, cfg: PPOConfig, available=None) -> None:
-  """Refuse (``ValueError`` naming ``num_envs``) a run whose estimated peak memory does not fit the device
-  (:mod:`train.memory`); checked before anything compiles."""
+def check_memory(trainer: Trainer, cfg: PPOConfig, available=None, num_devices: int = 1) -> None:
+  """Refuse (``ValueError`` naming ``num_envs``) a run whose estimated peak memory does not fit one device
+  (:mod:`train.memory`; the batch is spread evenly over ``num_devices``); checked before anything compiles."""
   sequences = cfg.minibatch_sequences * cfg.num_minibatches
   fp = trainer.footprint
   needed = (MEM.train_bytes(fp.state, trainer.obs_size, trainer.action_size, cfg.num_envs, sequences,
                             cfg.unroll_length, cfg.num_seeds, fp.particles)
-            + MEM.eval_bytes(fp.state, cfg.num_eval_envs, fp.particles))
+            + MEM.eval_bytes(fp.state, cfg.num_eval_envs, fp.particles)) / num_devices
   MEM.check_fits("num_envs", cfg.num_envs, needed, needed / cfg.num_envs,
                  MEM.available_bytes() if available is None else available,
                  f"{cfg.num_seeds} seed(s) of training")
@@ -167,7 +173,8 @@ def actor_from_checkpoint(file: str, trainer: Trainer, ts: TrainState) -> TrainS
 def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] = None,
           episode_length: Optional[int] = None, out_dir: Optional[str] = None, resume: bool = False,
           progress: bool = True, time_limit: Optional[float] = None, task_kwargs: Optional[dict] = None,
-          profile: bool = False, plot: bool = True, init_from: Optional[str] = None, **config) -> TrainResult:
+          profile: bool = False, plot: bool = True, init_from: Optional[str] = None, devices=None,
+          **config) -> TrainResult:
   """Train PPO / PPO-Lagrangian / PID-Lagrangian on ``task`` for one or several seeds in one program.
 
   Args:
@@ -185,6 +192,10 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     init_from: a checkpoint (run directory or file: a PPO run, or a BC actor from :mod:`train.bc_actor`)
       whose actor and observation normaliser start every seed (one seed broadcast, or one per seed);
       the critic starts fresh — ``critic_warmup_iterations`` holds the actor while it learns.
+    devices: "all", a count, or a device list (train.distributed.select_devices); None: the first device.
+      Seeds and each seed's env batch are laid across them (train.mesh); evaluation shards its episodes over them.
+      With several processes (train.distributed.initialize first) every process calls train() alike and
+      only process 0 writes files.
   SIGINT/SIGTERM: the running iteration finishes, a checkpoint is written (with ``out_dir``) and
   ``SystemExit(130)`` is raised.
   """
@@ -206,24 +217,33 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   env, task_name = resolve_task(task, task_kwargs)
   if episode_length is None:
     cfg = dataclasses.replace(cfg, episode_length=task_episode_length(env))
-  trainer = Trainer(env, cfg)
+  devs = distributed.select_devices(devices)
+  M.check_layout(cfg, len(devs))
+  mesh = M.make_mesh(devs, cfg.num_seeds)
+  trainer = Trainer(env, cfg, M.axis_name(mesh))
   init_file = None if init_from is None else check_init_from(init_from, trainer, cfg, task_name)
-  check_memory(trainer, cfg)
+  check_memory(trainer, cfg, num_devices=len(devs))
   S, spi = cfg.num_seeds, cfg.steps_per_iteration
-  seed_arr = jnp.asarray(cfg.seeds, jnp.int32)
+  seed_arr = np.asarray(cfg.seeds, np.int32)
+  main = distributed.is_main()
 
-  ckpt_path = None
+  ckpt_path, writes = None, None  # writes: where this process writes files (process 0 only)
   if out_dir is not None:
     out_dir = os.fspath(out_dir)
-    os.makedirs(out_dir, exist_ok=True)
     ckpt_path = os.path.join(out_dir, ckpt.FILENAME)
+    if main:
+      os.makedirs(out_dir, exist_ok=True)
+      writes = out_dir
   meta = {"task": task_name, "task_kwargs": task_kwargs or {}, "preset": preset, "config": cfg.to_json(),
           "obs_size": trainer.obs_size, "action_size": trainer.action_size, "steps_per_iteration": spi,
-          "init_from": None if init_file is None else os.path.abspath(init_file)}
+          "init_from": None if init_file is None else os.path.abspath(init_file),
+          "devices": len(devs), "mesh": dict(mesh.shape), "processes": jax.process_count()}
 
   timings = {k: 0.0 for k in ("compile", "eval_compile", "iterations", "eval", "checkpoint", "host")}
   rows: list = []
   init_fn = jax.vmap(trainer.init_state)
+  specs = M.state_specs(jax.eval_shape(init_fn, seed_arr))
+  layout = M.shardings(mesh, specs)
   if resume and os.path.exists(ckpt_path):
     old = ckpt.read_meta(ckpt_path)
     old_cfg = PPOConfig.from_json(old["config"]).to_json()
@@ -231,41 +251,43 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     if diff or old["task"] != task_name:
       raise ValueError(f"resume: checkpoint in {out_dir} was made with a different config "
                        f"({', '.join(diff) or 'task'})")
-    ts = jax.device_put(ckpt.restore(ckpt_path, jax.eval_shape(init_fn, seed_arr), "state"))
+    ts = M.put(ckpt.restore(ckpt_path, jax.eval_shape(init_fn, seed_arr), "state"), layout)
     start_iteration = int(ts.iteration[0])
     # Rows logged after the checkpoint were produced by the interrupted tail: redo them.
     rows = [r for r in _read_rows(out_dir) if r["iteration"] <= start_iteration]
   else:
     if resume:
       print(f"resume: no checkpoint in {out_dir}; starting a fresh run", file=sys.stderr)
-    ts = jax.jit(init_fn)(seed_arr)
+    ts = jax.jit(init_fn, out_shardings=layout)(seed_arr)
     if init_file is not None:
-      ts = actor_from_checkpoint(init_file, trainer, ts)
+      ts = M.put(jax.device_get(actor_from_checkpoint(init_file, trainer, jax.device_get(ts))), layout)
     start_iteration = 0
-  if out_dir is not None:
+  if writes is not None:
     io.write_json(os.path.join(out_dir, "config.json"), meta)
 
   # Donating the state lets XLA update the env batches in place (GPU memory).
-  iteration_fn = jax.jit(jax.vmap(trainer.train_iteration), donate_argnums=0)
-  evaluator = trainer.make_evaluator()
+  iteration_fn = M.per_seed(trainer.train_iteration, mesh, specs, (specs, M.P(M.SEEDS)), donate=True)
+  evaluator = trainer.make_evaluator(devs)
 
   def evaluate_all(ts, iteration):
     """Per-seed deterministic evaluation: seed s uses keys from PRNGKey(s + 1), folded with the iteration."""
-    params = jax.device_get(jax.vmap(trainer.inference_params)(ts))
+    params = distributed.to_host(trainer.inference_params(ts))
     return [trainer.evaluate(evaluator, jax.tree.map(lambda x: x[i], params),
                              jax.random.fold_in(jax.random.PRNGKey(s + 1), iteration), cfg.num_eval_envs)
             for i, s in enumerate(cfg.seeds)]
 
   def save(ts, iteration):
     t0 = time.perf_counter()
-    ckpt.save(ckpt_path, ts, jax.vmap(trainer.inference_params)(ts),
-              dict(meta, iteration=iteration, env_steps=iteration * spi))
+    host = distributed.to_host(ts)  # every process takes part; process 0 writes
+    if main:
+      ckpt.save(ckpt_path, host, trainer.inference_params(host),
+                dict(meta, iteration=iteration, env_steps=iteration * spi))
     timings["checkpoint"] += time.perf_counter() - t0
 
   n_iter = cfg.num_iterations
   eval_int, ckpt_int = cfg.interval_iterations(cfg.eval_every), cfg.interval_iterations(cfg.checkpoint_every)
   bar = None
-  if progress:
+  if progress and main:
     from tqdm import tqdm
     desc = f"{task_name} {cfg.multiplier if cfg.lagrangian else f'w={cfg.damage_weight:g}'} ×{S} seeds"
     bar = tqdm(total=n_iter * spi * S, initial=start_iteration * spi * S, unit="step", unit_scale=True,
@@ -277,14 +299,16 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     for iteration in range(start_iteration + 1, n_iter + 1):
       t0 = time.perf_counter()
       ts, m = iteration_fn(ts)
-      m = jax.device_get(m)  # blocks: the iteration has finished; every leaf f32[S]
+      m = distributed.to_host(m)  # blocks: the iteration has finished; every leaf f32[S]
       timings["iterations" if iteration > start_iteration + 1 else "compile"] += time.perf_counter() - t0
       t_host = time.perf_counter()
       for k in WINDOW_KEYS:
         window[k] += np.asarray(m[f"ended_{k}"], np.float64)
       last = iteration == n_iter
-      if (stop.signal is not None or (time_limit is not None and time.perf_counter() - t_start > time_limit)) \
-          and not last:
+      # One decision for all processes: one that stopped alone would leave the others in a collective.
+      signalled, over_time = distributed.any_process(
+          stop.signal is not None, time_limit is not None and time.perf_counter() - t_start > time_limit)
+      if (signalled or over_time) and not last:
         stopped_early = last = True
       if bar is not None:
         n = np.maximum(window["episodes"], 1.0)
@@ -295,7 +319,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
         bar.update(spi * S)
       timings["host"] += time.perf_counter() - t_host
 
-      if stop.signal is None and (last or (eval_int and iteration % eval_int == 0)):
+      if not signalled and (last or (eval_int and iteration % eval_int == 0)):
         t0 = time.perf_counter()
         evs = evaluate_all(ts, iteration)
         timings["eval_compile" if first_eval else "eval"] += time.perf_counter() - t0
@@ -310,12 +334,12 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
           row.update({k: float(v[i]) for k, v in m.items() if not k.startswith("ended_")})
           row.update({f"eval/{k}": v for k, v in evs[i].items()})
           rows.append(row)
-        _write_rows(out_dir, rows)
+        _write_rows(writes, rows)
         window = {k: np.zeros(S) for k in WINDOW_KEYS}
         final_evals = evs
       if ckpt_path and (last or (ckpt_int and iteration % ckpt_int == 0)):
         save(ts, iteration)
-      if stop.signal is not None:
+      if signalled:
         if bar is not None:
           bar.close()
         kept = (f"checkpoint at iteration {iteration} in {ckpt_path} (continue with --resume)" if ckpt_path
@@ -330,12 +354,12 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   if not final_evals and start_iteration >= n_iter:  # resumed a finished run: evaluate once
     final_evals = evaluate_all(ts, start_iteration)
   if profile:
-    timings.update(profile_iteration(trainer, ts, iteration_fn))
-  if out_dir is not None and plot and rows:
+    timings.update(profile_iteration(trainer, ts, iteration_fn, mesh, specs))
+  if writes is not None and plot and rows:
     from train import plots
     plots.plot_training(rows, os.path.join(out_dir, "curves.png"), title=task_name, budget=cfg.budget)
   timed_iters = max(iteration - start_iteration - 1, 0)
-  params0 = jax.tree.map(lambda x: x[0], trainer.inference_params(ts))
+  params0 = jax.tree.map(lambda x: x[0], distributed.to_host(trainer.inference_params(ts)))
   make_policy = trainer.make_policy
   return TrainResult(
       out_dir=out_dir, task=task_name, config=cfg, env_steps=iteration * spi, iterations=iteration,
@@ -343,14 +367,14 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       throughput=timed_iters * spi * S / timings["iterations"] if timings["iterations"] > 0 else float("nan"),
       final_eval=final_evals[0] if final_evals else {}, final_evals=final_evals, history=rows, timings=timings,
       policy=lambda state, rng: make_policy(params0, deterministic=True)(state.obs, rng)[0],
-      train_state=ts, stopped_early=stopped_early,
+      train_state=ts, stopped_early=stopped_early, devices=len(devs),
   )
 
 
-def profile_iteration(trainer: Trainer, ts: TrainState, iteration_fn, repeats: int = 3) -> dict:
+def profile_iteration(trainer: Trainer, ts: TrainState, iteration_fn, mesh, specs, repeats: int = 3) -> dict:
   """Seconds per iteration (all seeds): ``profile/rollout`` (env step + inference), ``profile/iteration``,
   ``profile/update`` (= iteration − rollout). Compiles the rollout alone once; the run's state is untouched."""
-  collect = jax.jit(jax.vmap(lambda s: trainer.collect(s)[1:]))
+  collect = M.per_seed(lambda s: trainer.collect(s)[1:], mesh, specs, (M.P(M.SEEDS, M.ENVS), M.P(M.SEEDS)))
   fresh = lambda: jax.block_until_ready(jax.tree.map(jnp.copy, ts))  # noqa: E731  (the iteration donates)
 
   def timeit(f, copy):
