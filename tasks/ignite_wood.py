@@ -2,8 +2,9 @@
 
 Scene (``ignite_wood.xml``): hearth floor = plane z = 0; a fireplace with a
 log pile centred at (0.2, 0) m, kindling at K = (0.2, 0, 0.09) m; a lit
-fireplace lighter (30 × 2.4 × 2.4 cm, 0.05 kg) lying along x on a stand of
-three 5 cm posts (grasped with the palm on its top, so it stays level),
+fireplace lighter (30 × 2.4 × 2.4 cm, 0.05 kg, 45 g of it in the 12 cm
+handle) lying along x on a stand of three 5 cm posts (grasped with the palm
+on its top and rubber pads, so it stays level when held),
 its flame (heat source ``lighter_flame``, 800 °C, reach 1 cm) 1.65 cm beyond
 the lighter's centre + 15 cm. When the flame has been within 3 cm of K for
 0.36 s (15 control steps, ``info["ignition"]`` ≥ 1) the wood catches: the
@@ -17,12 +18,13 @@ Tracked entities and parameters:
   heat rates: the temperature model's defaults, conduction 2/s, radiation
   0.2/s, cooling 0.05/s). A link whose COM is inside the burning pile conducts
   at 2/s toward 500 °C: it passes 40 °C within ≈ 20 ms. A hand 11.5 cm outside
-  the pile warms by < 0.1 °C/s.
+  the burning pile warms by < 0.5 °C/s.
 * the wood and the lighter are not tracked: the wood is meant to burn, and the
   paper's Ignite Wood damage is to the robot (one damageable object).
 
 Initial state (per episode): lighter centre x ∈ [−0.25, −0.23], y ∈ [−0.004,
-0.004] m on its stand (the posts are static, so the lighter moves only along them); grip point x ∈ [−0.2, −0.1], y ∈ [−0.05, 0.05], z ∈ [0.12,
+0.004] m on its stand (the posts are static, so the lighter only shifts
+along them); grip point x ∈ [−0.2, −0.1], y ∈ [−0.05, 0.05], z ∈ [0.12,
 0.18] m, gripper open; wood unlit (``ignition`` 0).
 
 Success (per step): the wood burns (``ignition`` ≥ 1; it never goes out).

@@ -39,7 +39,8 @@ def _rollout(name):
       s, bad, lo, hi, dmg = carry
       s = env.step(s, jax.lax.switch(which, policies, s, k))
       h = s.info["link_health"]
-      bad = bad | ~(jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward) & jnp.all(jnp.isfinite(s.pipeline_state.qpos)))
+      finite = jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward) & jnp.all(jnp.isfinite(s.pipeline_state.qpos))
+      bad = bad | ~finite
       dmg = dmg + jnp.stack([s.info["damage"][m] for m in MODELS])
       return (s, bad, jnp.minimum(lo, jnp.min(h)), jnp.maximum(hi, jnp.max(h)), dmg), s.metrics["success"]
 
