@@ -37,10 +37,12 @@ from tasks import robots
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
     "add_firewood": "tasks.add_firewood:AddFirewood",
+    "ignite_wood": "tasks.ignite_wood:IgniteWood",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "open_single_door": "tasks.open_single_door:OpenSingleDoor",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
+    "prepare_coffee": "tasks.prepare_coffee:PrepareCoffee",
     "pour_water": "tasks.pour_water:PourWater",
     "shelve_item": "tasks.shelve_item:ShelveItem",
     "turn_on_faucet": "tasks.turn_on_faucet:TurnOnFaucet",
