@@ -36,6 +36,7 @@ from tasks import robots
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
     "add_firewood": "tasks.add_firewood:AddFirewood",
+    "move_glass_of_water": "tasks.move_glass_of_water:MoveGlassOfWater",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
