@@ -40,6 +40,7 @@ _REGISTRY = {
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
+    "prepare_breakfast": "tasks.prepare_breakfast:PrepareBreakfast",
     "pour_water": "tasks.pour_water:PourWater",
     "shelve_item": "tasks.shelve_item:ShelveItem",
     "turn_on_stove": "tasks.turn_on_stove:TurnOnStove",

@@ -16,7 +16,7 @@ import pytest
 import tasks
 
 N_ENVS, STEPS = 16, 200
-TRANSPORT = ["move_glass_of_water"]
+TRANSPORT = ["move_glass_of_water", "prepare_breakfast"]
 
 
 def _random_rollout(name):
@@ -31,8 +31,9 @@ def _random_rollout(name):
       s, bad, lo, hi = carry
       s = env.step(s, jax.random.uniform(k, (env.action_size,), minval=-1.0, maxval=1.0))
       h = s.info["link_health"]
+      particles = jax.tree.leaves(s.info["damage_state"].liquid)  # [] for a task without liquid
       finite = (jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward) & jnp.all(jnp.isfinite(s.pipeline_state.qpos))
-                & jnp.all(jnp.isfinite(s.info["damage_state"].liquid.pos)))
+                & jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in particles] + [jnp.bool_(True)])))
       return (s, bad | ~finite, jnp.minimum(lo, jnp.min(h)), jnp.maximum(hi, jnp.max(h))), None
 
     init = (s, jnp.zeros((), bool), jnp.asarray(jnp.inf), jnp.asarray(-jnp.inf))
@@ -54,6 +55,11 @@ def test_random_actions_finite_bounded_and_obs_size(rollout):
   assert not bad.any(), f"{name}: non-finite obs/reward/qpos/particles under random actions"
   assert (lo >= 0.0).all() and (hi <= 100.0).all(), name
   assert ((eh >= 0) & (eh <= 100)).all(), name
+
+
+def test_prepare_breakfast_entities():
+  env = tasks.make("prepare_breakfast")
+  assert env.entity_names == ("plate", "cup", "agent") and env.observation_size == 20 and env.action_size == 4
 
 
 def test_move_glass_of_water_options():
