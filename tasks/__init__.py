@@ -38,10 +38,12 @@ from tasks import robots
 _REGISTRY = {
     "add_firewood": "tasks.add_firewood:AddFirewood",
     "ignite_wood": "tasks.ignite_wood:IgniteWood",
+    "move_glass_of_water": "tasks.move_glass_of_water:MoveGlassOfWater",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "open_single_door": "tasks.open_single_door:OpenSingleDoor",
     "pick_egg": "tasks.pick_egg:PickEgg",
     "place_plate": "tasks.place_plate:PlacePlate",
+    "prepare_breakfast": "tasks.prepare_breakfast:PrepareBreakfast",
     "prepare_coffee": "tasks.prepare_coffee:PrepareCoffee",
     "pour_water": "tasks.pour_water:PourWater",
     "shelve_item": "tasks.shelve_item:ShelveItem",
