@@ -208,7 +208,7 @@ def test_table_size():
 
 
 def test_every_subcommand_help_shows_defaults(capsys):
-  for cmd in ("eval", "sweep", "train", "bench", "demo"):
+  for cmd in cli.SUBCOMMANDS:
     assert cli.main([cmd, "--help"]) == 0
     out = capsys.readouterr().out
     assert "(default:" in out, cmd
