@@ -77,7 +77,7 @@ def check(res, name):
 @pytest.fixture(scope="module", params=sorted(DESIGNED))
 def small(request):
   name = request.param
-  return name, run_policies(name, DESIGNED[name], episodes=32)
+  return name, run_policies(name, DESIGNED[name], episodes=16)  # the slow test below runs 256
 
 
 def test_separation_and_shortcut_preference(small):
