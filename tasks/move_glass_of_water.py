@@ -248,14 +248,7 @@ class MoveGlassOfWater(Task):
     hand_speed = self.hand_speed
 
     def planned(e, vel, tgt, vmax):
-      delta = tgt - e
-      dist = jnp.linalg.norm(delta)
-      dirn = delta / jnp.maximum(dist, 1e-6)
-      v_along = jnp.dot(vel, dirn)
-      ramp = jnp.maximum(v_along, 0.0) + SAFE_ACCEL * dt
-      v_des = jnp.minimum(jnp.minimum(vmax, jnp.sqrt(2.0 * SAFE_ACCEL * dist)), ramp)
-      a = dirn * jnp.clip((2.0 * v_des - v_along) / hand_speed, 0.0, 1.0)
-      return jnp.where(dist < 0.003, R.move_toward(e, tgt, speed=0.05, gain=0.5), a)
+      return R.accel_limited_step(e, vel, tgt, vmax, SAFE_ACCEL, dt, hand_speed)
 
     def act(state, rng):
       d = state.pipeline_state

@@ -59,3 +59,21 @@ def move_toward(eef, target, speed=1.0, gain=1.0):
 def action(delta, gripper) -> jax.Array:
   """Assemble an action f32[4] from a position delta f32[3] and a gripper command f32[]."""
   return jnp.concatenate([delta, jnp.reshape(gripper, (1,))]).astype(jnp.float32)
+
+
+def accel_limited_step(eef, vel, target, vmax, accel, dt, hand_speed):
+  """Position-delta action f32[3] for a gentle carry of ``eef`` to ``target`` (m): speed along the line
+  ramped by ``accel``·dt per step (m/s²), braking as √(2·accel·distance), capped at ``vmax`` (m/s).
+
+  Commands twice the planned speed minus the measured one (``vel``, m/s), which makes up for the
+  servo's lag within a control step; ``hand_speed`` (m/s) is the speed of a full action. Within
+  3 mm it switches to a slow proportional approach.
+  """
+  delta = target - eef
+  dist = jnp.linalg.norm(delta)
+  dirn = delta / jnp.maximum(dist, 1e-6)
+  v_along = jnp.dot(vel, dirn)
+  ramp = jnp.maximum(v_along, 0.0) + accel * dt
+  v_des = jnp.minimum(jnp.minimum(vmax, jnp.sqrt(2.0 * accel * dist)), ramp)
+  a = dirn * jnp.clip((2.0 * v_des - v_along) / hand_speed, 0.0, 1.0)
+  return jnp.where(dist < 0.003, move_toward(eef, target, speed=0.05, gain=0.5), a)
