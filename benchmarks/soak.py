@@ -34,6 +34,7 @@ JSON path, the .md beside it); exits 1 when any counter above is non-zero.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import shlex
@@ -203,7 +204,12 @@ def main(argv=None) -> int:
   p.add_argument("--extreme-frac", type=float, default=0.05, help="share of action entries made extreme")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/soak_<platform>.json)")
+  p.add_argument("--merge", nargs="+", metavar="FILE.json",
+                 help="no soak: merge the task rows of earlier results files (one per task, e.g. run in "
+                      "parallel processes) into --out")
   args = p.parse_args(argv)
+  if args.merge:
+    return merge(args.merge, args.out, p)
   names = [t for t in args.tasks.split(",") if t]
   for t in names:
     if t not in tasks.names():
@@ -234,6 +240,33 @@ def main(argv=None) -> int:
       "tasks": rows, "ok": all(failures(r) == 0 for r in rows),
   }
   out = args.out or os.path.join(HERE, "results", f"soak_{dev.platform}.json")
+  io.write_json(out, res)
+  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
+  print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")
+  return 0 if res["ok"] else 1
+
+
+def merge(paths, out, p) -> int:
+  """One results file from several (same device and settings), rows in task order; exit status as a soak."""
+  runs = []
+  for path in paths:
+    try:
+      with open(path) as f:
+        runs.append(json.load(f))
+    except (OSError, ValueError) as e:
+      p.error(f"--merge: cannot read {path!r}: {e}")
+  keys = ("device", "envs", "steps_per_task", "chunk", "extreme_frac", "seed")
+  for r, path in zip(runs[1:], paths[1:]):
+    bad = [k for k in keys if r.get(k) != runs[0].get(k)]
+    if bad:
+      p.error(f"--merge: {path!r} differs from {paths[0]!r} in {bad}")
+  rows = sorted((t for r in runs for t in r["tasks"]), key=lambda t: t["task"])
+  names = [t["task"] for t in rows]
+  if len(set(names)) != len(names):
+    p.error(f"--merge: a task appears twice: {names}")
+  res = dict(runs[0], tasks=rows, ok=all(failures(t) == 0 for t in rows),
+             command="; ".join(r["command"] for r in runs), total_s=round(sum(r["total_s"] for r in runs), 1))
+  out = out or os.path.join(HERE, "results", f"soak_{res['device'].split(':')[0]}.json")
   io.write_json(out, res)
   io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
   print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")

@@ -55,9 +55,14 @@ def mechanical_load(
   along = jnp.sum(forces * ah, axis=-1)
   par = jnp.abs(along)
   perp = _norm(forces - along[:, None] * ah)
-  f_par = jax.ops.segment_sum(jnp.where(valid, par, 0.0), seg, num_segments=num_links + 1)
-  f_perp = jax.ops.segment_sum(jnp.where(valid, perp, 0.0), seg, num_segments=num_links + 1)
-  return f_par[:num_links], f_perp[:num_links]
+  # A masked sum over the force axis, not jax.ops.segment_sum: on GPU a segment sum is a scatter-add
+  # with atomics, whose summation order (and so the last bits of every link's load and health)
+  # changes from run to run (benchmarks/results/determinism_gpu.md). XLA fuses the mask into the
+  # reduction, so the bool[K, L] mask is never materialised.
+  onehot = seg[:, None] == jnp.arange(num_links, dtype=seg.dtype)[None, :]  # bool[K, L]; overflow → none
+  f_par = jnp.sum(jnp.where(onehot, par[:, None], 0.0), axis=0)
+  f_perp = jnp.sum(jnp.where(onehot, perp[:, None], 0.0), axis=0)
+  return f_par, f_perp
 
 
 def mechanical_damage(

@@ -144,3 +144,25 @@ def test_health_stays_in_range_and_never_rises(rates):
     v = float(h[0])
     assert 0.0 <= v <= prev <= 100.0
     prev = v
+
+
+def test_mechanical_load_is_a_scatter_free_sum_equal_to_segment_sum():
+  """Loads equal a per-link segment sum, computed without scatter-add (atomics on GPU change the last bits run to run)."""
+  k1, k2, k3 = jax.random.split(jax.random.PRNGKey(3), 3)
+  K, L = 40, 5
+  forces = jax.random.normal(k1, (K, 3)) * 50.0
+  links = jax.random.randint(k2, (K,), -1, L + 1)  # includes untracked (−1) and out-of-range (L)
+  acc = jax.random.normal(k3, (L, 3))
+  fp, fq = md.mechanical_load(forces, links, acc, L)
+  ahat = acc / jnp.linalg.norm(acc, axis=-1, keepdims=True)
+  valid = (links >= 0) & (links < L)
+  a = ahat[jnp.clip(links, 0, L - 1)]
+  along = jnp.sum(forces * a, axis=-1)
+  perp = jnp.linalg.norm(forces - along[:, None] * a, axis=-1)
+  seg = jnp.where(valid, links, L)
+  want_p = jax.ops.segment_sum(jnp.where(valid, jnp.abs(along), 0.0), seg, L + 1)[:L]
+  want_q = jax.ops.segment_sum(jnp.where(valid, perp, 0.0), seg, L + 1)[:L]
+  np.testing.assert_allclose(fp, want_p, rtol=1e-5, atol=1e-3)
+  np.testing.assert_allclose(fq, want_q, rtol=1e-5, atol=1e-3)
+  hlo = jax.jit(md.mechanical_load, static_argnums=3).lower(forces, links, acc, L).as_text()
+  assert "scatter" not in hlo

@@ -36,12 +36,21 @@ Findings (XLA:CPU, jaxlib 0.10.2; ``benchmarks``-free, rerun with ``-m slow``):
   holds for the sizes tested here, which is what the tests pin down.
 """
 
+import importlib.util
+import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import tasks
+
+# the rollout and comparison helpers are benchmarks/determinism.py's (its GPU run uses the same ones)
+_spec = importlib.util.spec_from_file_location(
+    "determinism", os.path.join(os.path.dirname(__file__), "..", "benchmarks", "determinism.py"))
+_det = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_det)
 
 STEPS = 20
 KEYS = jax.random.split(jax.random.PRNGKey(7), 8)
@@ -54,51 +63,13 @@ TOL_B1 = {
 }
 
 
-def rollout_fns(env):
-  """(init(keys u32[B, 2]) -> carry, advance(carry, t0, n) -> carry), both jitted over the batch."""
-
-  def init(key):
-    return env.reset(key), key
-
-  def advance(carry, t0, n):
-    def body(t, c):
-      s, key = c
-      a = jax.random.uniform(jax.random.fold_in(key, t), (env.action_size,), minval=-1.0, maxval=1.0)
-      return env.step(s, a), key
-
-    return jax.lax.fori_loop(t0, t0 + n, body, carry)
-
-  return jax.jit(jax.vmap(init)), jax.jit(jax.vmap(advance, in_axes=(0, None, None)))
+rollout_fns, run_steps, take = _det.rollout_fns, _det.run, _det.take
+bitwise_mismatches, compared = _det.bitwise_mismatches, _det.compared
 
 
 def run(fns, keys, chunks=(STEPS,)):
   """Final State (host arrays) of the rollout, its steps split into calls of ``chunks`` steps."""
-  init, advance = fns
-  carry = init(keys)
-  t = 0
-  for n in chunks:
-    carry = advance(carry, t, n)
-    t += n
-  return jax.device_get(carry[0])
-
-
-def take(tree, idx):
-  return jax.tree.map(lambda x: np.asarray(x)[idx], tree)
-
-
-def bitwise_mismatches(a, b) -> list:
-  """Paths of the leaves whose bytes differ (NaN payloads and the sign of zero included)."""
-  out = []
-  for (path, x), y in zip(jax.tree_util.tree_leaves_with_path(a), jax.tree.leaves(b)):
-    x, y = np.asarray(x), np.asarray(y)
-    if x.shape != y.shape or x.tobytes() != y.tobytes():
-      out.append(jax.tree_util.keystr(path))
-  return out
-
-
-def compared(s) -> dict:
-  return {"obs": s.obs, "reward": s.reward, "link_health": s.info["link_health"],
-          "qpos": s.pipeline_state.qpos, "qvel": s.pipeline_state.qvel}
+  return run_steps(fns, keys, chunks)
 
 
 @pytest.fixture(scope="module")
