@@ -11,16 +11,18 @@ the whole S-seed program; and the exact command that produced it.
 
 Methods (``--methods``): ``task_only`` (w = 0), ``penalty`` (w = ``--damage-weight``),
 ``lagrangian`` (PPO-Lagrangian, ĉ = ``--budget``), ``pid`` (PID-Lagrangian, ĉ =
-``--budget``) — all with ``--preset`` (playground: MuJoCo Playground's PandaPickCube
+``--budget``), ``lagrangian_curriculum`` / ``pid_curriculum`` (the same with the budget
+falling from the first measured episode cost to ĉ over ``--budget-anneal-steps``; with
+``--cost-critic`` every damage-aware method uses separate reward and cost critics) — all with ``--preset`` (playground: MuJoCo Playground's PandaPickCube
 recipe) — and ``paper`` / ``paper_task_only`` (the paper's PPO settings, w = 2 / 0).
 
 GPU (one H100; one device call per method, each ≤ 10 min: 300 s training incl.
 compile + final evaluation), results in $OUT, then one table::
 
-    for m in task_only penalty lagrangian pid paper; do
+    for m in task_only penalty lagrangian pid lagrangian_curriculum pid_curriculum; do
       python benchmarks/rl_multiseed.py --methods $m --seeds 0,1,2,3,4 --budget-seconds 300 --tag $m --results-dir $OUT
     done
-    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid,paper}.json --tag h100
+    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid,lagrangian_curriculum,pid_curriculum}.json --tag h100
 
 Other tasks where the unsafe shortcut is tempting (issue 12 item 5; docs/rl_task_design.md), one
 call per method::
@@ -52,7 +54,8 @@ os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cach
 
 from mjx_damage import io, runtime  # noqa: E402
 
-METHODS = ("task_only", "penalty", "lagrangian", "pid", "paper", "paper_task_only")
+METHODS = ("task_only", "penalty", "lagrangian", "pid", "lagrangian_curriculum", "pid_curriculum", "paper",
+           "paper_task_only")
 EVAL_SEED = 12345
 METRICS = ("completion", "safe_completion", "avg_env_health", "episode_cost")
 
@@ -60,16 +63,27 @@ METRICS = ("completion", "safe_completion", "avg_env_health", "episode_cost")
 def method_spec(name: str, args) -> dict:
   """Label and train() keywords of one method."""
   w = args.damage_weight
-  return {
+  spec = {
       "task_only": dict(label="task reward only (w=0)", preset=args.preset, damage_weight=0.0),
       "penalty": dict(label=f"damage penalty (w={w:g})", preset=args.preset, damage_weight=w),
       "lagrangian": dict(label=f"PPO-Lagrangian (ĉ={args.budget:g})", preset=args.preset, budget=args.budget,
                          multiplier="lagrangian"),
       "pid": dict(label=f"PID-Lagrangian (ĉ={args.budget:g})", preset=args.preset, budget=args.budget,
                   multiplier="pid"),
+      "lagrangian_curriculum": dict(label=f"PPO-Lagrangian, budget curriculum (ĉ={args.budget:g} after "
+                                          f"{args.budget_anneal_steps:.3g} steps)",
+                                    preset=args.preset, budget=args.budget, multiplier="lagrangian",
+                                    budget_anneal_steps=int(args.budget_anneal_steps)),
+      "pid_curriculum": dict(label=f"PID-Lagrangian, budget curriculum (ĉ={args.budget:g} after "
+                                   f"{args.budget_anneal_steps:.3g} steps)",
+                             preset=args.preset, budget=args.budget, multiplier="pid",
+                             budget_anneal_steps=int(args.budget_anneal_steps)),
       "paper": dict(label=f"paper PPO preset, penalty (w={w:g})", preset="paper", damage_weight=w),
       "paper_task_only": dict(label="paper PPO preset, task reward only", preset="paper", damage_weight=0.0),
   }[name]
+  if args.cost_critic and name not in ("task_only", "paper_task_only"):
+    spec = dict(spec, label=spec["label"] + " + cost critic", cost_critic=True)
+  return spec
 
 
 def _ints(text):
@@ -93,6 +107,11 @@ def parse(argv):
   p.add_argument("--unroll-length", type=int, default=None, help="default: the preset's")
   p.add_argument("--damage-weight", type=float, default=2.0)
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
+  p.add_argument("--cost-critic", action="store_true",
+                 help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
+  p.add_argument("--budget-anneal-steps", type=float, default=6e6,
+                 help="*_curriculum methods: env steps per seed over which the budget falls from the first "
+                      "measured episode cost to --budget (train.multipliers)")
   p.add_argument("--eval-every", type=float, default=3e6,
                  help="env steps per seed between periodic evaluations (each: S calls of --eval-envs episodes)")
   p.add_argument("--eval-envs", type=int, default=256, help="episodes per seed of each periodic evaluation")
@@ -119,6 +138,8 @@ def parse(argv):
     p.error(f"--seeds: distinct integers, got {args.seeds}")
   if args.budget_seconds <= 0:
     p.error("--budget-seconds: must be > 0")
+  if not args.budget_anneal_steps >= 0:
+    p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
   return args
 
 

@@ -7,9 +7,10 @@ import numpy as np
 from train import multipliers as M
 
 
-def _params(kind, budget=2.0, kp=0.0, ki=0.1, kd=0.0, lam_max=5.0):
+def _params(kind, budget=2.0, kp=0.0, ki=0.1, kd=0.0, lam_max=5.0, anneal=0):
   f = lambda v: jnp.float32(v)  # noqa: E731
-  return M.MultiplierParams(kind=f(kind), budget=f(budget), kp=f(kp), ki=f(ki), kd=f(kd), lam_max=f(lam_max))
+  return M.MultiplierParams(kind=f(kind), budget=f(budget), kp=f(kp), ki=f(ki), kd=f(kd), lam_max=f(lam_max),
+                            anneal_updates=f(anneal))
 
 
 def test_lagrange_update_rule():
@@ -80,3 +81,30 @@ def test_update_vmaps_over_seeds():
   p = jax.tree.map(lambda x: jnp.stack([x, x]), _params(M.PID, kp=1.0))
   out = jax.vmap(M.update)(s, p, jnp.array([5.0, 0.0]), jnp.ones(2))
   assert out.lam.shape == (2,) and float(out.lam[0]) > 0.0
+
+
+def test_budget_curriculum_starts_at_the_first_cost_and_reaches_the_budget():
+  """ĉ_t falls linearly from J_c,0 to ĉ over anneal_updates; λ stays 0 while the cost follows it."""
+  for kind in (M.LAGRANGIAN, M.PID):
+    p = _params(kind, budget=2.0, kp=0.1, ki=0.1, kd=0.05, anneal=10)
+    s = M.update(M.init(), p, 100.0, 0.0)  # no episode has ended: nothing recorded
+    assert float(s.updates) == 0 and float(s.start_cost) == 0
+    budgets = []
+    for t in range(14):
+      cost = float(M.effective_budget(s, p)) if t else 100.0  # a policy that meets each budget exactly
+      s = M.update(s, p, cost, 1.0)
+      budgets.append(float(M.effective_budget(s, p)))
+      assert float(s.lam) == 0.0, (kind, t)
+    assert float(s.start_cost) == 100.0
+    np.testing.assert_allclose(budgets[:10], [2 + 98 * (1 - (t + 1) / 10) for t in range(10)], rtol=1e-5)
+    assert budgets[9:] == [2.0] * 5
+    # over the curriculum's budget, λ rises — the same step as without the curriculum
+    hot = M.update(s, p, 50.0, 1.0)
+    assert float(hot.lam) > 0
+
+
+def test_without_curriculum_the_first_costly_update_pins_lambda():
+  """The failure the curriculum avoids: from a random policy's cost, λ jumps towards λ_max at once."""
+  p, q = _params(M.PID, kp=0.1, ki=0.01, kd=0.05), _params(M.PID, kp=0.1, ki=0.01, kd=0.05, anneal=100)
+  assert float(M.update(M.init(), p, 100.0, 1.0).lam) == 5.0
+  assert float(M.update(M.init(), q, 100.0, 1.0).lam) == 0.0

@@ -163,6 +163,20 @@ def test_pid_multiplier_run_stays_in_range(env):
   assert np.any(lam > 0.0)  # the random pusher exceeds a zero budget
 
 
+def test_budget_curriculum_run(env):
+  """A budget curriculum in the same compiled iteration (its length is data): ĉ_t falls from the first
+  measured episode cost to ĉ = 0 over 6 iterations, then stays there."""
+  from train import multipliers as M
+
+  kw = dict(seeds=SEEDS, budget=0.0, lagrange_lr=0.01, budget_anneal_steps=6 * ITER, **TINY)
+  for iters, done in ((5, False), (10, True)):
+    ts = train.train(env, num_timesteps=iters * ITER, **kw).train_state
+    mult = ts.multiplier
+    assert np.all(np.asarray(mult.start_cost) > 0.0)  # the random pusher damages the vase
+    budget = np.asarray(jax.vmap(M.effective_budget)(mult, ts.multiplier_params))
+    assert np.all(budget == 0.0) if done else np.all(budget > 0.0), (iters, budget)
+
+
 @pytest.mark.parametrize("kwargs,name", [
     (dict(budget=-1.0), "budget"),
     (dict(num_envs=0), "num_envs"),

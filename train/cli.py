@@ -93,6 +93,10 @@ CONFIG_FLAGS = (
     ("--pid-kp", "pid_kp", float, "PID-Lagrangian proportional gain"),
     ("--pid-ki", "pid_ki", float, "PID-Lagrangian integral gain"),
     ("--pid-kd", "pid_kd", float, "PID-Lagrangian derivative gain (rising cost only)"),
+    ("--cost-critic", "cost_critic", _bool, "true: separate reward and cost critics, advantages mixed with λ"),
+    ("--budget-anneal-steps", "budget_anneal_steps", _int,
+     "budget curriculum: ĉ falls linearly from the first measured episode cost to --budget over this many env "
+     "steps per seed (0: --budget from the start)"),
     ("--num-envs", "num_envs", _int, "training envs per seed"),
     ("--timesteps", "num_timesteps", _int, "training env steps per seed"),
     ("--unroll-length", "unroll_length", _int, None),

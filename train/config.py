@@ -91,6 +91,12 @@ class PPOConfig:
   pid_kp: float = 0.1
   pid_ki: float = 0.01
   pid_kd: float = 0.05
+  # Budget curriculum (train.multipliers): the Lagrangian's budget falls linearly from the first measured
+  # episode cost to ``budget`` over this many env steps per seed; 0: ``budget`` from the start.
+  budget_anneal_steps: int = 0
+  # Separate value estimates for task reward and cost, advantages mixed with the current λ
+  # (train.constrained_loss) instead of one critic on the shaped reward.
+  cost_critic: bool = False
   num_eval_envs: int = 128
   eval_every: int = 0  # env steps between evaluations; 0 → only at the end
   checkpoint_every: int = 0  # env steps between checkpoints; 0 → only at the end
@@ -113,6 +119,11 @@ class PPOConfig:
   @property
   def lagrangian(self) -> bool:
     return self.budget is not None
+
+  @property
+  def budget_anneal_iterations(self) -> int:
+    """``budget_anneal_steps`` in iterations (multiplier updates), rounded up; 0 when off."""
+    return -(-self.budget_anneal_steps // self.steps_per_iteration)
 
   @property
   def num_seeds(self) -> int:
@@ -197,6 +208,13 @@ class PPOConfig:
     number("budget", lo=0, allow_none=True)
     for name in ("lagrange_lr", "lagrange_init", "lagrange_max", "pid_kp", "pid_ki", "pid_kd"):
       number(name, lo=0)
+    v = self.budget_anneal_steps
+    if not is_int(v) or v < 0:
+      raise ValueError(f"budget_anneal_steps: must be an integer >= 0 (env steps per seed), got {v!r}")
+    if v and self.budget is None:
+      raise ValueError("budget_anneal_steps: anneals the Lagrangian's budget; set budget too (got budget=None)")
+    if not isinstance(self.cost_critic, bool):
+      raise ValueError(f"cost_critic: true or false, got {self.cost_critic!r}")
     if self.multiplier not in MULTIPLIERS:
       raise ValueError(f"multiplier: one of {', '.join(MULTIPLIERS)}, got {self.multiplier!r}")
     for name in ("policy_hidden_sizes", "value_hidden_sizes"):
@@ -228,7 +246,8 @@ class PPOConfig:
     names = {f.name for f in dataclasses.fields(cls)}
     # Older checkpoints lack the newer fields: they ran with what these were then.
     old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
-           "value_cost": 0.5}
+           "value_cost": 0.5, "budget_anneal_steps": 0,
+           "cost_critic": False}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

@@ -18,7 +18,9 @@ Policy reward per step::
 0: w and λ are traced values, not constants baked into the env). With λ ≡ 0
 (penalty / task-only) this is the paper's r_task − w·cost. The 1/(1 + λ) factor
 keeps the return scale bounded while λ grows (episode cost is unbounded) and
-leaves the task/cost trade-off set by λ.
+leaves the task/cost trade-off set by λ. With ``cost_critic`` the reward stays
+r_task and the loss mixes separate reward and cost advantages the same way
+(train.constrained_loss), so a change of λ does not invalidate the critic.
 
 Time limits: brax's EpisodeWrapper marks the last step of an episode with
 ``truncation = 1`` and ``done = 1``; the loss treats ``done ∧ ¬truncation`` as
@@ -155,7 +157,7 @@ class Trainer:
         multiplier_params=M.MultiplierParams(
             kind=f32(kind), budget=f32(cfg.budget or 0.0), kp=f32(0.0 if plain else cfg.pid_kp),
             ki=f32(cfg.lagrange_lr if plain else cfg.pid_ki), kd=f32(0.0 if plain else cfg.pid_kd),
-            lam_max=f32(cfg.lagrange_max)),
+            lam_max=f32(cfg.lagrange_max), anneal_updates=f32(cfg.budget_anneal_iterations)),
         damage_weight=f32(cfg.damage_weight),
         cost_estimate=f32(0.0),
         has_cost_estimate=f32(0.0),
@@ -208,11 +210,13 @@ class Trainer:
     return ts.replace(env_state=env_state, episode=acc, rng=key), data, self._psum(jax.tree.map(jnp.sum, ended))
 
   # -- learning -------------------------------------------------------------
-  def _minibatch(self, normalizer, carry, inp):
-    """One SGD step; with ``target_kl`` a step whose pre-update KL exceeds 1.5·target stops the rest."""
+  def _minibatch(self, normalizer, weights, carry, inp):
+    """One SGD step; with ``target_kl`` a step whose pre-update KL exceeds 1.5·target stops the rest.
+    ``weights``: (w, λ) f32[] each, what the cost critic's loss mixes the advantages with."""
     params, opt_state, stopped = carry
     mb, key = inp
-    (_, metrics), new_params, new_opt = self.gradient_update(params, normalizer, mb, key, optimizer_state=opt_state)
+    (_, metrics), new_params, new_opt = self.gradient_update(params, normalizer, mb, key, *weights,
+                                                             optimizer_state=opt_state)
     metrics = self._pmean({k: metrics[k] for k in LOSS_KEYS})  # one KL on every shard: they stop together
     if self.cfg.target_kl is None:
       return (new_params, new_opt, stopped), (metrics, jnp.ones(()))
@@ -220,21 +224,23 @@ class Trainer:
     keep = lambda old, new: jax.tree.map(lambda a, b: jnp.where(stop, a, b), old, new)  # noqa: E731
     return (keep(params, new_params), keep(opt_state, new_opt), stop), (metrics, 1.0 - stop.astype(jnp.float32))
 
-  def _epoch(self, normalizer, data, carry, key):
+  def _epoch(self, normalizer, weights, data, carry, key):
     k_perm, k_loss = jax.random.split(key)
     n_mb = self.cfg.num_minibatches
     shuffled = jax.tree.map(lambda x: jax.random.permutation(k_perm, x).reshape((n_mb, -1) + x.shape[1:]), data)
-    return jax.lax.scan(functools.partial(self._minibatch, normalizer), carry,
+    return jax.lax.scan(functools.partial(self._minibatch, normalizer, weights), carry,
                         (shuffled, jax.random.split(k_loss, n_mb)))
 
-  def update(self, ts: TrainState, data: types.Transition):
-    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order)."""
+  def update(self, ts: TrainState, data: types.Transition, lam=None):
+    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order).
+    ``lam``: the λ the data was collected under (default the state's)."""
+    weights = (ts.damage_weight, ts.multiplier.lam if lam is None else lam)
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
     if self.cfg.normalize_observations:
       normalizer = running_statistics.update(normalizer, data.observation, pmap_axis_name=self.axis_name)
     (params, opt_state, _), (metrics, taken) = jax.lax.scan(
-        functools.partial(self._epoch, normalizer, data),
+        functools.partial(self._epoch, normalizer, weights, data),
         (ts.params, ts.opt_state, jnp.zeros((), bool)),
         jax.random.split(self._local(k_sgd), self.cfg.num_updates_per_batch))
     metrics = {k: jnp.sum(v * taken) / jnp.maximum(jnp.sum(taken), 1.0) for k, v in metrics.items()}
@@ -257,18 +263,20 @@ class Trainer:
     lam = ts.multiplier.lam
     ts, data, ended = self.collect(ts)
     cost = data.extras["state_extras"]["cost"]  # f32[R·E, T]
-    data = data._replace(reward=shape_reward(data.reward, cost, ts.damage_weight, lam))
+    shaped = shape_reward(data.reward, cost, ts.damage_weight, lam)
+    if not self.cfg.cost_critic:  # with a cost critic the loss mixes the advantages instead (train.constrained_loss)
+      data = data._replace(reward=shaped)
     n = ended["episodes"]
     cost_estimate = jnp.where(n > 0, ended["cost"] / jnp.maximum(n, 1.0), ts.cost_estimate)
     has_estimate = jnp.maximum(ts.has_cost_estimate, (n > 0).astype(jnp.float32))
     mult = M.update(ts.multiplier, ts.multiplier_params, cost_estimate, has_estimate)
-    ts, loss_metrics = self.update(ts, data)
+    ts, loss_metrics = self.update(ts, data, lam)
     ts = ts.replace(multiplier=mult, cost_estimate=cost_estimate, has_cost_estimate=has_estimate,
                     iteration=ts.iteration + 1)
     metrics = {f"ended_{k}": v for k, v in ended.items()}
     metrics.update({("sgd_steps" if k == "sgd_steps" else f"loss/{k}"): v for k, v in loss_metrics.items()})
-    metrics.update(step_reward=self._pmean(jnp.mean(data.reward)), step_cost=self._pmean(jnp.mean(cost)),
-                   lagrange=mult.lam,
+    metrics.update(step_reward=self._pmean(jnp.mean(shaped)), step_cost=self._pmean(jnp.mean(cost)),
+                   lagrange=mult.lam, budget=M.effective_budget(mult, ts.multiplier_params),
                    cost_estimate=cost_estimate)
     return ts, metrics
 

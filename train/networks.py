@@ -26,6 +26,7 @@ from brax.training.acme import running_statistics
 from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 
+from train import constrained_loss as CL
 from train.config import PPOConfig
 
 ACTIVATIONS: dict[str, Callable] = {
@@ -38,8 +39,9 @@ MIN_STD = 0.001  # brax NormalTanhDistribution's floor on the scale
 
 
 def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networks.PPONetworks:
+  """Brax's PPO networks; with ``cfg.cost_critic`` the critic has a second output, V_c (train.constrained_loss)."""
   normalize = running_statistics.normalize if cfg.normalize_observations else types.identity_observation_preprocessor
-  return ppo_networks.make_ppo_networks(
+  nets = ppo_networks.make_ppo_networks(
       obs_size,
       action_size,
       preprocess_observations_fn=normalize,
@@ -47,6 +49,11 @@ def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networ
       value_hidden_layer_sizes=tuple(cfg.value_hidden_sizes),
       activation=ACTIVATIONS[cfg.activation],
   )
+  if not cfg.cost_critic:
+    return nets
+  value = CL.make_value_network(obs_size, normalize, cfg.value_hidden_sizes, ACTIVATIONS[cfg.activation])
+  return nets.__class__(policy_network=nets.policy_network, value_network=value,
+                        parametric_action_distribution=nets.parametric_action_distribution)
 
 
 def initial_log_std(cfg: PPOConfig, action_size: int):
@@ -102,21 +109,26 @@ def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
 
 
 def make_gradient_update(network, optimizer, cfg: PPOConfig, axis_name: Optional[str] = None):
-  """``update(params, normalizer, minibatch [B, T], key, optimizer_state=...) -> ((loss, metrics), params, opt_state)``.
+  """``update(params, normalizer, minibatch [B, T], key, w, λ, optimizer_state=...) -> ((loss, metrics), params,
+  opt_state)``.
 
-  ``axis_name``: gradients are averaged over this mesh axis (train.mesh) before the optimizer step.
+  Without a cost critic the minibatch's reward is already shaped with w and λ (train.iteration) and
+  brax's loss ignores them; with one (``cfg.cost_critic``) the reward is the task reward and
+  train.constrained_loss mixes the two advantages with w and λ. ``axis_name``: gradients are averaged
+  over this mesh axis (train.mesh) before the optimizer step.
   """
-  loss_fn = functools.partial(
-      ppo_losses.compute_ppo_loss,
-      ppo_network=network,
-      entropy_cost=cfg.entropy_cost,
-      discounting=cfg.discounting,
-      reward_scaling=cfg.reward_scaling,
-      gae_lambda=cfg.gae_lambda,
-      clipping_epsilon=cfg.clipping_epsilon,
-      normalize_advantage=True,
-      vf_coefficient=cfg.value_cost,
-  )
+  common = dict(ppo_network=network, entropy_cost=cfg.entropy_cost, discounting=cfg.discounting,
+                reward_scaling=cfg.reward_scaling, gae_lambda=cfg.gae_lambda,
+                clipping_epsilon=cfg.clipping_epsilon, vf_coefficient=cfg.value_cost)
+  if cfg.cost_critic:
+    loss_fn = functools.partial(CL.compute_loss, **common)
+  else:
+    brax_loss = functools.partial(ppo_losses.compute_ppo_loss, normalize_advantage=True, **common)
+
+    def loss_fn(params, normalizer, data, rng, cost_weight, lam):
+      del cost_weight, lam  # already in data.reward
+      return brax_loss(params, normalizer, data, rng)
+
   return gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=axis_name, has_aux=True)
 
 

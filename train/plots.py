@@ -39,6 +39,9 @@ def plot_training(rows: Sequence[dict], path: str, title: str = "", budget: Opti
                  label="safe completion" if first else None)
     if lagrangian:
       axes[3].plot(*_series(rows, "lagrange", seed), marker=".", color=color, label=tag or None)
+      if any(r.get("budget") is not None and r["budget"] > budget for r in rows):  # a budget curriculum
+        axes[1].plot(*_series(rows, "budget", seed), ls=":", color=color, lw=1,
+                     label="budget in force" if first else None)
   axes[0].set_title("task return per episode")
   axes[1].set_title("damage (cost) per episode")
   if lagrangian:
