@@ -41,10 +41,10 @@ dense reward ``−‖grip point − egg‖ − 2·‖egg − goal‖`` ``+ succe
 every contact (``priority`` 1; MuJoCo would otherwise take the pads' 1.0).
 Why: with the task reward alone, the crushing grip must be the faster way to
 the goal. A gentle ≈ 2 N pinch on a μ 0.7 shell holds the egg only while the
-hand accelerates and brakes gently (≈ 4 m/s²: the scripted safe carry; at
-8 m/s² a third of the eggs slip out), while the crushing grip holds through
-the hand's full-speed starts and stops; the unsafe carry reaches success ≈ 27
-control steps earlier.
+hand accelerates and brakes gently (4 m/s²: the scripted safe carry; at
+8 m/s² 39 % of the eggs slip out before the goal: benchmarks/egg_carry_sweep.py),
+while the crushing grip holds through the hand's full-speed starts and stops;
+the unsafe carry reaches success ≈ 27 control steps earlier.
 """
 
 from __future__ import annotations
