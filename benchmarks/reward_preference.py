@@ -50,8 +50,7 @@ from mjx_damage.io import write_json, write_text  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 RL_TASKS = ("place_plate", "pick_egg", "shelve_item")
-# The setting each task is trained in (issue 24; the paper's Place Plate: 6-D observation, plate in hand).
-RL_SETTINGS = {"place_plate": {"obs_mode": "paper"}}
+RL_SETTINGS = tasks.RL_SETTINGS  # the setting each task is trained in (issue 24)
 WINDOW = 10  # steps per window of the reward-trace summary
 
 

@@ -56,8 +56,7 @@ from mjx_damage.io import write_json, write_text  # noqa: E402
 from train.evaluate import evaluate, parametrized_policy  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
-# The setting each task is trained in (issue 24; Place Plate: the paper's 6-D observation, plate in hand).
-RL_SETTINGS = {"place_plate": {"obs_mode": "paper"}}
+RL_SETTINGS = tasks.RL_SETTINGS  # the setting each task is trained in (issue 24)
 # MuJoCo Playground 0.2.0, manipulation_params.brax_ppo_config("PandaPickCube") (base config + its branch).
 PLAYGROUND_PANDA_PICK_CUBE = {
     "num_envs": 2048, "batch_size": 512, "num_minibatches": 32, "num_updates_per_batch": 8, "unroll_length": 10,

@@ -94,8 +94,8 @@ def parse(argv):
   p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--task", default="place_plate", help="registered task, or package.module:EnvClass")
   p.add_argument("--obs-mode", default=None,
-                 help="task obs_mode (default: paper for place_plate — the paper's 6-d observation and in-hand "
-                      "start — else the task's own)")
+                 help="task obs_mode (default: the task's RL setting, tasks.RL_SETTINGS — for place_plate the "
+                      "paper's 6-d observation and in-hand start — else the task's own)")
   p.add_argument("--methods", default="task_only,penalty,lagrangian,pid", help=f"comma-separated of {','.join(METHODS)}")
   p.add_argument("--seeds", type=_ints, default=(0, 1, 2, 3, 4))
   p.add_argument("--preset", default="playground", help="preset of the non-paper methods (train/config.py)")
@@ -180,14 +180,21 @@ def stats(values):
 
 
 def run_method(name: str, args, command: str, work: str) -> dict:
+  import tasks
   import train
   from train import evaluate as E
 
   spec = method_spec(name, args)
   kw = {k: v for k, v in spec.items() if k != "label"}
   kw.update(size_overrides(spec["preset"], args))
-  obs_mode = args.obs_mode or ("paper" if args.task == "place_plate" else None)
-  task_kwargs = {"obs_mode": obs_mode} if ":" not in args.task and obs_mode else None
+  # a registered task in its RL setting (tasks.RL_SETTINGS: Place Plate's paper observation and in-hand
+  # start, Pick Egg's carry); --obs-mode overrides the observation
+  task_kwargs = None
+  if ":" not in args.task:
+    task_kwargs = dict(tasks.RL_SETTINGS.get(args.task, {}))
+    if args.obs_mode:
+      task_kwargs["obs_mode"] = args.obs_mode
+    task_kwargs = task_kwargs or None
   run_dir = os.path.join(work, name)
   print(f"== {name}: {spec['label']}, seeds {list(args.seeds)}, {args.budget_seconds:.0f} s", flush=True)
   steps = min(args.timesteps, args.paper_timesteps) if spec["preset"] == "paper" else args.timesteps

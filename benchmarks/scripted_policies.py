@@ -14,13 +14,16 @@ Targets (issue #4): safe policy completion ≥ 95 % and safe completion ≥ 90 %
 unsafe policy completion ≥ 80 % and safe completion ≤ 10 %.
 
 ``--robot`` picks the robot (:func:`tasks.robots.names`; default the gripper);
-``--name`` the results' file stem (default ``scripted_policies`` for the
-gripper, ``scripted_policies_<robot>_<backend>`` otherwise).
+``--rl-settings`` builds each task in its RL setting (``tasks.RL_SETTINGS``, e.g.
+Pick Egg's carry to a goal) instead of its defaults; ``--name`` the results' file
+stem (default ``scripted_policies`` for the gripper with default settings,
+``scripted_policies_rl`` with ``--rl-settings``, ``scripted_policies_<robot>_<backend>``
+otherwise).
 
 Usage::
 
     .venv/bin/python benchmarks/scripted_policies.py [--episodes 256] [--chunk 64] [--tasks a,b] [--seed 0] \
-        [--robot panda] [--name scripted_policies_panda_cpu]
+        [--robot panda] [--name scripted_policies_panda_cpu] [--rl-settings]
 """
 
 from __future__ import annotations
@@ -60,7 +63,8 @@ def meets_target(style: str, row: dict) -> bool:
   return row["completion_pct"] >= 80.0 and row["safe_completion_pct"] <= 10.0
 
 
-def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = robots.DEFAULT) -> list[dict]:
+def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = robots.DEFAULT,
+             settings: dict | None = None) -> list[dict]:
   """Both policies' episodes of one task; ``chunk`` episodes per policy per compiled call.
 
   All calls reuse ONE compiled executable (same shapes). ``chunk = episodes``
@@ -70,7 +74,8 @@ def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = robot
   """
   if episodes % chunk:
     raise ValueError(f"chunk: must divide episodes ({episodes}), got {chunk}")
-  env = tasks.make(name, robot=robot)
+  settings = dict(settings or {})
+  env = tasks.make(name, robot=robot, **settings)
   length = env.unwrapped.episode_length
   run = rollout_fn(env, [tasks.scripted_policy(env, s) for s in STYLES], length)
   rngs = jax.random.split(jax.random.PRNGKey(seed), len(STYLES) * episodes).reshape(len(STYLES), episodes, -1)
@@ -92,7 +97,7 @@ def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = robot
   rows = []
   for i, style in enumerate(STYLES):
     sub = jax.tree.map(lambda x: x[i * episodes : (i + 1) * episodes], stats)
-    row = {"task": name, "robot": robot, "policy": style, "episode_length": length,
+    row = {"task": name, "robot": robot, "settings": settings, "policy": style, "episode_length": length,
            "entities": list(env.entity_names)}
     row.update(summarise(sub))
     row["first_compile_s"] = round(t_compile, 1)
@@ -156,6 +161,10 @@ def write(rows: list[dict], command: str, stem: str = "scripted_policies") -> No
         f"| {r['avg_env_health']:.1f} | {r['zero_damage_pct']:.1f} | {r['mean_episode_cost']:.1f} | {per_model(r)} "
         f"| {r['first_compile_s']:.0f} | {r['run_s']:.0f} | {'met' if r['meets_target'] else 'MISSED'} |"
     )
+  settings = {r["task"]: r["settings"] for r in rows if r.get("settings")}
+  if settings:
+    lines += ["", "Settings (make() overrides, the tasks' RL settings): "
+              + "; ".join(f"{n}: {v}" for n, v in settings.items()) + "; other tasks: defaults."]
   lines += ["", "Mean final health per entity:", ""]
   for r in rows:
     ents = ", ".join(f"{n} {h:.1f}" for n, h in zip(r["entities"], r["entity_health_mean"]))
@@ -170,10 +179,12 @@ def main(argv=None) -> int:
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--chunk", type=int, default=0, help="episodes per policy per compiled call (default: all in one)")
   p.add_argument("--robot", default=robots.DEFAULT, help=f"one of {', '.join(robots.names())}")
+  p.add_argument("--rl-settings", action="store_true",
+                 help="build each task in its RL setting (tasks.RL_SETTINGS) instead of its defaults")
   p.add_argument("--name", default=None, help="results file stem under benchmarks/results (see the module docstring)")
   a = p.parse_args(argv)
   robots.robot_class(a.robot)  # ValueError listing the valid robots, before anything compiles
-  stem = a.name or ("scripted_policies" if a.robot == robots.DEFAULT
+  stem = a.name or (("scripted_policies_rl" if a.rl_settings else "scripted_policies") if a.robot == robots.DEFAULT
                     else f"scripted_policies_{a.robot}_{jax.default_backend()}")
   if not stem or os.sep in stem or stem.startswith("."):
     raise ValueError(f"name: must be a plain file stem, got {stem!r}")
@@ -187,7 +198,8 @@ def main(argv=None) -> int:
   COMMAND = command.strip()
   rows = []
   for n in names:
-    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes, a.robot)
+    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes, a.robot,
+                     tasks.RL_SETTINGS.get(n, {}) if a.rl_settings else {})
     write(rows, command.strip(), stem)  # partial results survive an interrupted run
   return 0
 

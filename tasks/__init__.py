@@ -53,6 +53,11 @@ _REGISTRY = {
     "wipe_counter": "tasks.wipe_counter:WipeCounter",
 }
 
+# The setting each task is trained in with RL, as make() overrides (issue 24, docs/rl_task_design.md: the
+# setting in which the task reward alone prefers the unsafe shortcut). Place Plate: the paper's 6-D
+# observation and in-hand start; Pick Egg: the egg carried to a goal. Tasks not listed: their defaults.
+RL_SETTINGS = {"place_plate": {"obs_mode": "paper"}, "pick_egg": {"goal": "carry"}}
+
 # Wrapper overrides: make() keyword -> (DamageWrapper keyword, default).
 _WRAPPER_OPTIONS = {
     "damage_weight": ("weight", 0.0),

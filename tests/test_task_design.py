@@ -23,8 +23,8 @@ import mjx_damage  # noqa: E402,F401
 import tasks  # noqa: E402
 
 GAMMAS = (0.97, 0.99)
-# (task, make() overrides: the setting it is trained in)
-DESIGNED = {"place_plate": {"obs_mode": "paper"}, "shelve_item": {}}
+# task -> make() overrides: the setting it is trained in (tasks.RL_SETTINGS)
+DESIGNED = {n: tasks.RL_SETTINGS.get(n, {}) for n in ("place_plate", "pick_egg", "shelve_item")}
 
 
 def run_policies(name, overrides, episodes, seed=0):
@@ -81,6 +81,7 @@ def small(request):
 
 
 def test_separation_and_shortcut_preference(small):
+  """Every designed task in its RL setting: scripted separation, and the shortcut earns more task return."""
   name, res = small
   check(res, name)
 
@@ -121,3 +122,19 @@ def test_shelve_item_hand_speed_knob():
   assert tasks.default_config("shelve_item")["hand_speed"] == pytest.approx(0.4)
   assert tasks.make("shelve_item").unwrapped._speed_scale == pytest.approx(0.4 * 0.024 / 0.02)
   assert tasks.make("shelve_item", hand_speed=0.0).unwrapped._speed_scale == 1.0
+
+
+def test_pick_egg_goal_knob():
+  """``goal`` is validated before anything compiles; the lift stays the default, the carry is the RL setting."""
+  for bad in ("place", "", None, 1):
+    with pytest.raises(ValueError, match="goal"):
+      tasks.make("pick_egg", goal=bad)
+  assert tasks.default_config("pick_egg")["goal"] == "lift"
+  assert tasks.RL_SETTINGS["pick_egg"] == {"goal": "carry"}
+  lift, carry = tasks.make("pick_egg").unwrapped, tasks.make("pick_egg", goal="carry").unwrapped
+  assert (lift.episode_length, lift.observation_size) == (80, 14)
+  assert (carry.episode_length, carry.observation_size) == (100, 17)  # + the goal
+  egg = [t.mj_model.geom("egg").id for t in (lift, carry)]
+  # the carry's smooth shell: its own μ on every contact, not the pads' larger one
+  assert lift.mj_model.geom_priority[egg[0]] == 0 and lift.mj_model.geom_friction[egg[0], 0] == pytest.approx(1.0)
+  assert carry.mj_model.geom_priority[egg[1]] == 1 and carry.mj_model.geom_friction[egg[1], 0] == pytest.approx(0.7)
