@@ -103,27 +103,34 @@ class TurnOnFaucet(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    lead = 0.3 if safe else 0.7  # rad the commanded contact point runs ahead of the lever
-    speed = 0.4 if safe else 1.0
-    closed = -1.0
 
     def act(state, rng):
       d = state.pipeline_state
-      e, th = robot.eef_pos(d), self.angle(d)
-      rel = e[:2] - jnp.asarray(PIVOT_XY)
-      u = jnp.stack([-jnp.cos(th), -jnp.sin(th)])
-      t = jnp.stack([jnp.sin(th), -jnp.cos(th)])
-      along, side = rel @ u, rel @ t
-      low = e[2] < LEVER_Z + GRIP_DZ + 0.015
-      engaged = low & (along > 0.03) & (along < 0.11) & (side < 0.0) & (side > -0.05)
-      # approach: above the pre-push point (1.5 cm behind the bar), then straight down
-      pre = self.push_point(th, back=0.015)
-      above = pre.at[2].set(LEVER_Z + 0.05)
-      aligned = jnp.linalg.norm(e[:2] - pre[:2]) < 0.006
-      tgt = jnp.where(aligned, pre, jnp.where(e[2] < LEVER_Z + 0.03, e.at[2].set(LEVER_Z + 0.05), above))
-      a_reach = R.action(R.move_toward(e, tgt), closed)
-      th_cmd = jnp.minimum(th + lead, SAFE_ANGLE) if safe else th + lead
-      a_push = R.action(R.move_toward(e, self.push_point(th_cmd), speed=speed), closed)
-      return jnp.where(engaged, a_push, a_reach)
+      return lever_push_action(robot.eef_pos(d), self.angle(d), safe)
 
     return act
+
+
+def lever_push_action(e, th, safe):
+  """Action f32[4] that gets the closed fingers beside the lever bar's trailing side, descends, then pushes the
+  bar round its arc; ``e`` grip point (m), ``th`` lever angle (rad). ``safe``: the contact point leads the bar by
+  0.3 rad at 0.4 of full speed and stops at 75°; otherwise it leads by 0.7 rad at full speed, past the stop.
+  Shared with fill_bowl, whose faucet has this lever."""
+  lead = 0.3 if safe else 0.7  # rad the commanded contact point runs ahead of the lever
+  speed = 0.4 if safe else 1.0
+  closed = -1.0
+  rel = e[:2] - jnp.asarray(PIVOT_XY)
+  u = jnp.stack([-jnp.cos(th), -jnp.sin(th)])
+  t = jnp.stack([jnp.sin(th), -jnp.cos(th)])
+  along, side = rel @ u, rel @ t
+  low = e[2] < LEVER_Z + GRIP_DZ + 0.015
+  engaged = low & (along > 0.03) & (along < 0.11) & (side < 0.0) & (side > -0.05)
+  # approach: above the pre-push point (1.5 cm behind the bar), then straight down
+  pre = TurnOnFaucet.push_point(th, back=0.015)
+  above = pre.at[2].set(LEVER_Z + 0.05)
+  aligned = jnp.linalg.norm(e[:2] - pre[:2]) < 0.006
+  tgt = jnp.where(aligned, pre, jnp.where(e[2] < LEVER_Z + 0.03, e.at[2].set(LEVER_Z + 0.05), above))
+  a_reach = R.action(R.move_toward(e, tgt), closed)
+  th_cmd = jnp.minimum(th + lead, SAFE_ANGLE) if safe else th + lead
+  a_push = R.action(R.move_toward(e, TurnOnFaucet.push_point(th_cmd), speed=speed), closed)
+  return jnp.where(engaged, a_push, a_reach)
