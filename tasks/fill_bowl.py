@@ -52,6 +52,8 @@ fraction of the water in the bowl, fraction running (2)] = 15.
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 
@@ -63,7 +65,7 @@ PARTICLES = 64
 RADIUS = 0.006  # m
 OUTLET = (-0.05, 0.0, 0.30)  # m, where the stream leaves the spout
 RATE_MAX = 120.0  # particles/s at a fully open lever (90°)
-OPEN_ANGLE = jnp.pi / 2  # rad, the lever's stop: opening 1
+OPEN_ANGLE = math.pi / 2  # rad, the lever's stop: opening 1
 V0 = 0.8  # m/s, downward speed at the outlet
 LANE = 1.05 * RADIUS  # m, lane offset from the outlet's axis (two lanes 2.1 r apart)
 PARK_CENTER = (3.0, 0.0, 1.0)  # m, parked particles' lattice (far from every geom)
@@ -111,8 +113,8 @@ class FillBowl(Task):
 
   def setup(self, m):
     j = m.joint("lever").id
-    self._q, self._v = int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
-    self._bq, self._bv = free_joint_adr(m, "bowl")
+    self._q = int(m.jnt_qposadr[j])
+    self._bq, _ = free_joint_adr(m, "bowl")
     self._bowl = m.body("bowl").id
     lm = self.damage_binding.liquid
     self._park = jnp.asarray(lm.spawn_pos + lm.lattice @ lm.spawn_mat.T, jnp.float32)
