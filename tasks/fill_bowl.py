@@ -252,7 +252,8 @@ class FillBowl(Task):
         # 4. once the bowl holds CLOSE_AT particles, push the lever back shut, then lift off it
         n_bowl, _ = self.water(d, state.info)
         shut = th < 0.01
-        a_close = jnp.where(shut, R.action(R.move_toward(e, e.at[2].set(0.3)), -1.0), lever_push_action(e, th, True, True))
+        a_close = jnp.where(shut, R.action(R.move_toward(e, e.at[2].set(0.3)), -1.0),
+                            lever_push_action(e, th, True, close=True))
         a_faucet = jnp.where(n_bowl >= CLOSE_AT, a_close, a_lever)
         return jnp.where(placed, jnp.where(near_bowl, a_leave, a_faucet), a_bowl)
       over_rim = e[2] > BOWL_RIM + 0.015

@@ -42,7 +42,8 @@ def rollout():
       finite = jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward) & jnp.all(jnp.isfinite(s.pipeline_state.qpos))
       dmg = dmg + jnp.stack([s.info["damage"][m] for m in MODELS])
       top = jnp.maximum(top, s.pipeline_state.qpos[2])
-      return (s, bad | ~finite, jnp.minimum(lo, jnp.min(h)), jnp.maximum(hi, jnp.max(h)), dmg, top), s.metrics["success"]
+      carry = (s, bad | ~finite, jnp.minimum(lo, jnp.min(h)), jnp.maximum(hi, jnp.max(h)), dmg, top)
+      return carry, s.metrics["success"]
 
     init = (s, jnp.zeros((), bool), jnp.asarray(jnp.inf), jnp.asarray(-jnp.inf), jnp.zeros(len(MODELS)),
             jnp.asarray(-jnp.inf))
