@@ -37,8 +37,10 @@ from tasks import robots
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
     "add_firewood": "tasks.add_firewood:AddFirewood",
+    "fill_bowl": "tasks.fill_bowl:FillBowl",
     "ignite_wood": "tasks.ignite_wood:IgniteWood",
     "move_glass_of_water": "tasks.move_glass_of_water:MoveGlassOfWater",
+    "navigate_and_pick": "tasks.navigate_and_pick:NavigateAndPick",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "open_single_door": "tasks.open_single_door:OpenSingleDoor",
     "pick_egg": "tasks.pick_egg:PickEgg",

@@ -72,13 +72,14 @@ class TurnOnFaucet(Task):
     return d.qpos[self._q]
 
   @staticmethod
-  def push_point(theta, back=0.0):
-    """Grip point (f32[3], m) whose fingers touch the bar's trailing side at lever angle ``theta``, ``back`` m behind."""
+  def push_point(theta, back=0.0, leading=False):
+    """Grip point (f32[3], m) whose fingers touch the bar's trailing side (``leading``: the side it turns
+    toward, to push it back) at lever angle ``theta``, ``back`` m off the bar."""
     u = jnp.stack([-jnp.cos(theta), -jnp.sin(theta)])  # along the bar, away from the pivot
     t = jnp.stack([jnp.sin(theta), -jnp.cos(theta)])  # direction the bar's points move as θ grows
     # support of the axis-aligned finger pair along t: how far its centre sits from the bar's surface
     off = LEVER_R + PAD_HALF_X * jnp.abs(t[0]) + PAD_HALF_Y * jnp.abs(t[1]) + back
-    xy = jnp.asarray(PIVOT_XY) + PUSH_R * u - off * t
+    xy = jnp.asarray(PIVOT_XY) + PUSH_R * u + (off if leading else -off) * t
     return jnp.concatenate([xy, jnp.array([LEVER_Z + GRIP_DZ])])
 
   def sample_init(self, rng, qpos):
@@ -103,27 +104,40 @@ class TurnOnFaucet(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    lead = 0.3 if safe else 0.7  # rad the commanded contact point runs ahead of the lever
-    speed = 0.4 if safe else 1.0
-    closed = -1.0
 
     def act(state, rng):
       d = state.pipeline_state
-      e, th = robot.eef_pos(d), self.angle(d)
-      rel = e[:2] - jnp.asarray(PIVOT_XY)
-      u = jnp.stack([-jnp.cos(th), -jnp.sin(th)])
-      t = jnp.stack([jnp.sin(th), -jnp.cos(th)])
-      along, side = rel @ u, rel @ t
-      low = e[2] < LEVER_Z + GRIP_DZ + 0.015
-      engaged = low & (along > 0.03) & (along < 0.11) & (side < 0.0) & (side > -0.05)
-      # approach: above the pre-push point (1.5 cm behind the bar), then straight down
-      pre = self.push_point(th, back=0.015)
-      above = pre.at[2].set(LEVER_Z + 0.05)
-      aligned = jnp.linalg.norm(e[:2] - pre[:2]) < 0.006
-      tgt = jnp.where(aligned, pre, jnp.where(e[2] < LEVER_Z + 0.03, e.at[2].set(LEVER_Z + 0.05), above))
-      a_reach = R.action(R.move_toward(e, tgt), closed)
-      th_cmd = jnp.minimum(th + lead, SAFE_ANGLE) if safe else th + lead
-      a_push = R.action(R.move_toward(e, self.push_point(th_cmd), speed=speed), closed)
-      return jnp.where(engaged, a_push, a_reach)
+      return lever_push_action(robot.eef_pos(d), self.angle(d), safe)
 
     return act
+
+
+def lever_push_action(e, th, safe, close=False):
+  """Action f32[4] that gets the closed fingers beside the lever bar's trailing side, descends, then pushes the
+  bar round its arc; ``e`` grip point (m), ``th`` lever angle (rad). ``safe``: the contact point leads the bar by
+  0.3 rad at 0.4 of full speed and stops at 75°; otherwise it leads by 0.7 rad at full speed, past the stop.
+  ``close`` (safe only): from the bar's other side, back to 0 (aiming 0.03 rad past the stop, a ≈ 10 N press).
+  Shared with fill_bowl, whose faucet has this lever."""
+  lead = 0.3 if safe else 0.7  # rad the commanded contact point runs ahead of the lever
+  speed = 0.4 if safe else 1.0
+  closed = -1.0
+  rel = e[:2] - jnp.asarray(PIVOT_XY)
+  u = jnp.stack([-jnp.cos(th), -jnp.sin(th)])
+  t = jnp.stack([jnp.sin(th), -jnp.cos(th)])
+  along, side = rel @ u, rel @ t
+  if close:
+    side = -side
+  low = e[2] < LEVER_Z + GRIP_DZ + 0.015
+  engaged = low & (along > 0.03) & (along < 0.11) & (side < 0.0) & (side > -0.05)
+  # approach: above the pre-push point (1.5 cm behind the bar), then straight down
+  pre = TurnOnFaucet.push_point(th, back=0.015, leading=close)
+  above = pre.at[2].set(LEVER_Z + 0.05)
+  aligned = jnp.linalg.norm(e[:2] - pre[:2]) < 0.006
+  tgt = jnp.where(aligned, pre, jnp.where(e[2] < LEVER_Z + 0.03, e.at[2].set(LEVER_Z + 0.05), above))
+  a_reach = R.action(R.move_toward(e, tgt), closed)
+  if close:
+    th_cmd = jnp.maximum(th - lead, -0.03)
+  else:
+    th_cmd = jnp.minimum(th + lead, SAFE_ANGLE) if safe else th + lead
+  a_push = R.action(R.move_toward(e, TurnOnFaucet.push_point(th_cmd, leading=close), speed=speed), closed)
+  return jnp.where(engaged, a_push, a_reach)
