@@ -45,6 +45,7 @@ _REGISTRY = {
     "place_plate": "tasks.place_plate:PlacePlate",
     "prepare_breakfast": "tasks.prepare_breakfast:PrepareBreakfast",
     "prepare_coffee": "tasks.prepare_coffee:PrepareCoffee",
+    "serve_pastry": "tasks.serve_pastry:ServePastry",
     "pour_water": "tasks.pour_water:PourWater",
     "shelve_item": "tasks.shelve_item:ShelveItem",
     "turn_on_faucet": "tasks.turn_on_faucet:TurnOnFaucet",
