@@ -53,7 +53,15 @@ from tasks.base import Task, free_joint_adr, quat_z_axis
 
 SEAT_Z = 0.16  # m, clamp seat height above the counter
 BODY_HALF = (0.055, 0.032, 0.035)  # m, camera body box
-GRIP_DZ = 0.011  # m, grip point above the camera frame (plate underside): body top 1 mm under the palm
+BODY_TOP = 0.08  # m, camera body's top above the camera frame (plate underside)
+
+
+def grip_dz(finger_length):
+  """Grip point above the camera frame (m) with the body's top 1 mm under the palm of a robot whose palm is
+  ``finger_length`` m above its fingertips (the gripper: 1.1 cm; rounded to µm so it is exactly that)."""
+  return round(BODY_TOP + 0.001 - finger_length, 6)
+
+
 SAFE_PRE = 0.05  # m, plate height above the seat where the safe policy lines up
 UNSAFE_PRE = 0.08  # m, the unsafe policy's: room to reach full speed
 RELEASED_GAP = 2 * BODY_HALF[1] + 0.01  # m
@@ -75,6 +83,7 @@ class AttachCamera(Task):
   success_condition = "camera plate seated in the clamp, upright, at rest, gripper released"
 
   def setup(self, m: mujoco.MjModel) -> None:
+    self.grip_dz = grip_dz(self.robot.finger_length)
     self._q, self._v = free_joint_adr(m, "camera")
     self._mocap = int(m.body_mocapid[m.body("tripod").id])
 
@@ -88,7 +97,7 @@ class AttachCamera(Task):
     eef = jnp.concatenate([tripod + off[:2], off[2:]])
     # fingers 0.5 mm inside the camera body: the grip holds from the first substep
     qpos = self.robot.home(qpos, eef, BODY_HALF[1] + R.FINGER_HALF_THICK - 0.0005)
-    cam = eef - jnp.array([0.0, 0.0, GRIP_DZ])
+    cam = eef - jnp.array([0.0, 0.0, self.grip_dz])
     qpos = qpos.at[self._q : self._q + 7].set(jnp.concatenate([cam, jnp.array([1.0, 0, 0, 0])]))
     seat = jnp.concatenate([tripod, jnp.array([SEAT_Z])]).astype(jnp.float32)
     return qpos, {"seat": seat}
@@ -127,6 +136,7 @@ class AttachCamera(Task):
     robot = self.robot
     pre = SAFE_PRE if safe else UNSAFE_PRE
     opened = R.gripper_command_for_gap(2 * BODY_HALF[1] + 0.03)
+    dz = self.grip_dz
 
     def act(state, rng):
       d = state.pipeline_state
@@ -148,10 +158,10 @@ class AttachCamera(Task):
 
       # 2. insert straight down, keeping the plate on the clamp's axis
       if safe:
-        down = jnp.concatenate([seat[:2] + grip_off[:2], jnp.array([SEAT_Z + GRIP_DZ - 0.002])])
+        down = jnp.concatenate([seat[:2] + grip_off[:2], jnp.array([SEAT_Z + dz - 0.002])])
         speed = jnp.clip(height / 0.04, 0.06, 0.5)
       else:
-        down = jnp.concatenate([seat[:2] + grip_off[:2], jnp.array([SEAT_Z + GRIP_DZ - 0.03])])
+        down = jnp.concatenate([seat[:2] + grip_off[:2], jnp.array([SEAT_Z + dz - 0.03])])
         speed = 1.0
       a_insert = R.action(R.move_toward(e, down, speed=speed), -1.0)
 

@@ -59,7 +59,16 @@ from tasks.base import Task, free_joint_adr
 HEAD_HALF = (0.04, 0.04, 0.015)  # m
 HANDLE_HALF = 0.015  # m, half width of the square handle
 HANDLE_TOP = 0.115  # m, top of the handle above the bristles' underside
-GRASP_Z = 0.05  # m, grip-point height of the grasp: fingertips 2 cm above the head, palm 5 mm above the handle
+PALM_CLEARANCE = 0.005  # m, palm above the handle's top at the grasp
+
+
+def grasp_z(finger_length):
+  """Grip-point height of the grasp above the bristles (m) for a robot whose palm is ``finger_length`` m
+  above its fingertips: the palm 5 mm above the handle's top (the gripper: 5 cm, fingertips 2 cm above
+  the head; rounded to µm so it is exactly that)."""
+  return round(HANDLE_TOP + PALM_CLEARANCE - finger_length, 6)
+
+
 HOVER_Z = 0.18  # m, grip-point height hovering over the brush before the descent (fingertips over the glass)
 LIFT_Z = 0.08  # m, bristles' height that counts as picked up
 PRESHAPE_GAP = 2 * HANDLE_HALF + 0.02  # m: 1 cm clearance each side of the handle, inside the head's width
@@ -80,6 +89,7 @@ class PickUpScrub(Task):
   success_condition = "scrub brush held ≥ 8 cm above the counter"
 
   def setup(self, m: mujoco.MjModel) -> None:
+    self.grasp_z = grasp_z(self.robot.finger_length)
     self._q, self._v = free_joint_adr(m, "scrub_brush")
     self._gq, _ = free_joint_adr(m, "wineglass")
 
@@ -103,7 +113,7 @@ class PickUpScrub(Task):
 
   def evaluate(self, d, info):
     b = self.brush_pos(d)
-    grasp = b + jnp.array([0.0, 0.0, GRASP_Z])
+    grasp = b + jnp.array([0.0, 0.0, self.grasp_z])
     reward = -jnp.linalg.norm(self.robot.eef_pos(d) - grasp) - 2.0 * jnp.maximum(0.10 - b[2], 0.0)
     return reward, b[2] >= LIFT_Z, {"brush_height": b[2]}
 
@@ -121,12 +131,13 @@ class PickUpScrub(Task):
     robot = self.robot
     preshape = R.gripper_command_for_gap(PRESHAPE_GAP)
     close = R.gripper_command_for_gap(2 * HANDLE_HALF - 0.06)  # 3 cm inside each side: ≈ 12 N per pad
+    gz = self.grasp_z
 
     def act(state, rng):
       d = state.pipeline_state
       e, g = robot.eef_pos(d), robot.gap(d)
       b = self.brush_pos(d)
-      grasp = b + jnp.array([0.0, 0.0, GRASP_Z])
+      grasp = b + jnp.array([0.0, 0.0, gz])
       xy_err = jnp.linalg.norm(e[:2] - b[:2])
       rel_z = e[2] - b[2]  # grip point above the bristles' underside
       held = (g < 2 * HANDLE_HALF + 0.004) & (xy_err < 0.015) & (rel_z < HANDLE_TOP) & (rel_z > 0.0)
@@ -137,8 +148,8 @@ class PickUpScrub(Task):
         tgt_far = jnp.where(rel_z < HOVER_Z - 0.02, e.at[2].set(b[2] + HOVER_Z), hover)
         a_far = R.action(R.move_toward(e, tgt_far), preshape)
         # descend, slowing over the last 4 cm (≥ 1.7 mm per step), stop at the grasp height, close
-        speed = jnp.clip((rel_z - GRASP_Z) / 0.04, 0.1, 1.0)
-        at_grasp = rel_z < GRASP_Z + 0.002
+        speed = jnp.clip((rel_z - gz) / 0.04, 0.1, 1.0)
+        at_grasp = rel_z < gz + 0.002
         a_down = R.action(R.move_toward(e, grasp, speed=speed), jnp.where(at_grasp, close, preshape))
         a_reach = jnp.where(far, a_far, a_down)
       else:
