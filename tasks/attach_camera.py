@@ -40,6 +40,11 @@ centimetres, stop on the seat, let go, lift away.
 
 Observation (``full``): [proprio (8); camera pos (3); camera quat (4); camera
 lin. vel (3); seat (3)] = 21.
+
+Robots: tuned and measured on the default floating gripper (no wrist needed:
+the clamp is square and the camera is held level); the hold follows the
+robot's palm height (:func:`grip_dz`), so the Panda builds the scene, but its
+scripted results are not measured yet.
 """
 
 from __future__ import annotations

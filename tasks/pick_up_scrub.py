@@ -45,6 +45,10 @@ the palm 5 mm above the handle's top, close, lift.
 
 Observation (``full``): [proprio (8); brush pos (3); brush quat (4); brush lin.
 vel (3); wine glass pos (3)] = 21.
+
+Robots: tuned and measured on the default floating gripper (no wrist needed);
+the grasp height follows the robot's palm height (:func:`grasp_z`), so the
+Panda builds the scene, but its scripted results are not measured yet.
 """
 
 from __future__ import annotations

@@ -45,6 +45,11 @@ the plate, open, lift away.
 
 Observation (``full``): [proprio (8); pastry pos (3); pastry quat (4); pastry
 lin. vel (3); plate pos (3)] = 21.
+
+Robots: the scripted policies are tuned and measured on the default floating
+gripper (no wrist needed: the pastry is taken across its 5 cm width, within
+the Panda's 8 cm stroke too); the Panda builds the scene, its scripted
+results are not measured yet.
 """
 
 from __future__ import annotations
