@@ -6,8 +6,10 @@ one does not carry over to the floating gripper with the paper's agent row (α
 0.01, β 1, E 70 N): the arm's hardest press is ≈ 100 N (a full 2 cm servo
 lead), so only the palm can take more than E, and a hand held pressing down
 on the brush is loaded along its own (vibrating, vertical) acceleration,
-where α = 0.01 makes the load nearly free — 40 control steps of full press
-cost the robot 0–15 health, sporadically, the landing nothing. The design here
+where α = 0.01 makes the load nearly free: in a trace of this scene's first
+version (the hand pressing on the handle's top) a held full press damaged the
+hand only sporadically, after many steps, and the landing not at all — no
+reliable signature of a shortcut. The design here
 keeps "precise picking" and the tracked brush and moves the hazard to a
 fragile neighbour in the fast reach (the issue's alternative design):
 

@@ -18,8 +18,10 @@ Tracked entities and parameters:
   inertia, ε ≈ 5 N) and above setting it down, while the full-close squeeze
   (2 × 16 N, ε ≈ 32 N) exceeds it by ≈ 24 N, ≈ 120 health per τ: the pastry
   is crushed within a few substeps. The soft pastry cushions its own fall: a
-  10 cm drop onto the plate after a gentle grasp costs it ≈ 2 health (style
-  ``"drop"``), so the squeeze is what ruins it.
+  10 cm drop onto the plate after a gentle grasp leaves it above 95 health
+  (style ``"drop"``: 100 % safe completion in
+  ``benchmarks/results/reward_preference_pastry_scrub_camera.md``), so the
+  squeeze is what ruins it.
 * ``plate`` — table row ``plate`` (α 1, β 0.5, E 50 N, Λ 10). A 40 g pastry
   cannot break it; tracked because the paper counts it (a hand that hits it,
   a random policy's slam, can).
