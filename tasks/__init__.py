@@ -37,11 +37,13 @@ from tasks import robots
 # name -> "module:Class" (imported lazily: constructing a task loads its scene).
 _REGISTRY = {
     "add_firewood": "tasks.add_firewood:AddFirewood",
+    "dishes_to_sink": "tasks.dishes_to_sink:DishesToSink",
     "ignite_wood": "tasks.ignite_wood:IgniteWood",
     "move_glass_of_water": "tasks.move_glass_of_water:MoveGlassOfWater",
     "open_drawer": "tasks.open_drawer:OpenDrawer",
     "open_single_door": "tasks.open_single_door:OpenSingleDoor",
     "pick_egg": "tasks.pick_egg:PickEgg",
+    "place_in_microwave": "tasks.place_in_microwave:PlaceInMicrowave",
     "place_plate": "tasks.place_plate:PlacePlate",
     "prepare_breakfast": "tasks.prepare_breakfast:PrepareBreakfast",
     "prepare_coffee": "tasks.prepare_coffee:PrepareCoffee",
