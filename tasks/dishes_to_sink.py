@@ -38,6 +38,10 @@ touches the floor, slowing down on the way, then release and lift away.
 
 Observation (``full``): [proprio (8); plate pos (3) + lin. vel (3); cup pos (3) +
 lin. vel (3)] = 20.
+
+Robot: designed and tuned for the default floating gripper. The 12 cm plate is
+wider than the Panda hand's 8 cm stroke, so with ``robot="panda"`` the scripted
+policies cannot grasp it (no per-robot scene edit yet).
 """
 
 from __future__ import annotations

@@ -49,6 +49,10 @@ and withdraw (both pull the open, empty hand out at full speed: it touches
 nothing).
 
 Observation (``full``): [proprio (8); dish pos (3) + quat (4) + lin. vel (3)] = 18.
+
+Robot: designed and tuned for the default floating gripper. The 10 cm dish is
+wider than the Panda hand's 8 cm stroke, so with ``robot="panda"`` the scripted
+policies cannot grasp it (no per-robot scene edit yet).
 """
 
 from __future__ import annotations
