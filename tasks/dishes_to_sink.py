@@ -152,9 +152,9 @@ class DishesToSink(Task):
 
     The dish being handled is the first one not yet done; a dish is done once it is
     over the basin (centre inside the opening) and not held — so a dropped dish
-    counts while it falls, and the hand first rises straight up, clear of it. Per dish, as in place_plate: ``held`` (fingers
-    closed on it round the grip point) selects carrying, else approaching; with
-    both done the open hand lifts away.
+    counts while it falls, and the hand first rises straight up, clear of it. Per
+    dish, as in place_plate: ``held`` (fingers closed on it round the grip point)
+    selects carrying, else approaching; with both done the open hand lifts away.
     """
     if style not in ("safe", "unsafe"):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
@@ -178,7 +178,7 @@ class DishesToSink(Task):
       done_each = over_basin & ~held_each
       i = jnp.where(done_each[0], 1, 0)
       p, v, goal = ps[i], vs[i], goals[i]
-      held, h, dz, c = held_each[i], half[i], grip_dz[i], closed[i]
+      held, dz, c = held_each[i], grip_dz[i], closed[i]
       grasp_z = p[2] + dz  # grip-point height that grasps the dish where it stands
       carry_z = CARRY_Z
 
