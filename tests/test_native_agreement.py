@@ -1,10 +1,12 @@
 """Native MuJoCo (the viewer's path) and MJX agree on health for the same action sequence.
 
 For one task per damage model — mechanical (Pick Egg), thermal (Add Firewood),
-fluid (Pour Water) — the scripted unsafe policy runs on MJX, and its actions
-are replayed open-loop through :mod:`apps.viewer.native_env` (the task's own
-step with native physics, :func:`mjx_damage.native.step`: native contacts, the
-same temperature and liquid models). The entity the policy damages must
+fluid (Pour Water) — the scripted unsafe policy runs on MJX (the first unsafe
+episode of the task contract's batched rollout, tests/conftest.py ``task_rollout``:
+no MJX step compile of its own), and its actions are replayed open-loop through
+:mod:`apps.viewer.native_env` (the task's own step with native physics,
+:func:`mjx_damage.native.step`: native contacts, the same temperature and
+liquid models). The entity the policy damages must
 really be damaged, and on both paths every entity must end within 5 health
 points (5 % of 100) and cross 95 and 50 health at the same control step (±1).
 
@@ -23,8 +25,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import tasks
 from apps.viewer import native_env as N
+from conftest import UNSAFE
 from mjx_damage import native
 
 # task → (control steps, entity the unsafe policy damages, health model it goes through)
@@ -43,28 +45,26 @@ def _first_below(h: np.ndarray, level: float) -> np.ndarray:
 
 
 @pytest.fixture(scope="module", params=sorted(CASES))
-def rollouts(request):
+def rollouts(request, task_rollout):
+  """The MJX side is the first unsafe episode of the task contract's rollout (tests/conftest.py: its
+  compiled program, shared with tests/test_task_contract.py); its actions are replayed natively from
+  the same reset key."""
   name = request.param
   steps = CASES[name][0]
-  env = tasks.make(name)
-  policy, step = jax.jit(tasks.scripted_policy(env, "unsafe")), jax.jit(env.step)
-  s = jax.jit(env.reset)(jax.random.PRNGKey(0))
-  actions, h_mjx, d_mjx = [], [], []
-  for k in range(steps):
-    a = policy(s, jax.random.PRNGKey(k))
-    s = step(s, a)
-    actions.append(np.asarray(a))
-    h_mjx.append(np.asarray(s.info["entity_health"]))
-    d_mjx.append([float(s.info["damage"][m]) for m in ("mechanical", "thermal", "fluid")])
+  env, r = task_rollout(name)
+  i = int(np.flatnonzero(r["which"] == UNSAFE)[0])
+  actions = r["actions"][i, :steps]
+  h_mjx, d_mjx = r["health_t"][i, :steps], r["damage_t"][i, :steps]
+  ds_mjx = {"temperature": r["temperature_t"][i, steps - 1], "exposure": r["exposure_t"][i, steps - 1]}
   nat = N.make(env)
   data = mujoco.MjData(nat.model)
-  sn = N.reset(nat, data, jax.random.PRNGKey(0))
+  sn = N.reset(nat, data, r["reset_key"][i])
   h_nat, d_nat = [], []
   for a in actions:
     sn = N.step(nat, data, sn, a)
     h_nat.append(np.asarray(sn.info["entity_health"]))
     d_nat.append([float(sn.info["damage"][m]) for m in ("mechanical", "thermal", "fluid")])
-  return name, env, np.array(h_mjx), np.array(h_nat), np.array(d_mjx), np.array(d_nat), s, sn
+  return name, env, h_mjx, np.array(h_nat), d_mjx, np.array(d_nat), ds_mjx, sn
 
 
 def test_native_health_agrees_with_mjx(rollouts):
@@ -81,15 +81,16 @@ def test_native_health_agrees_with_mjx(rollouts):
 
 def test_native_temperature_and_liquid_follow_mjx(rollouts):
   name, env, _, _, _, _, s_mjx, s_nat = rollouts
-  ds_m, ds_n = s_mjx.info["damage_state"], s_nat.info["damage_state"]
+  ds_n = s_nat.info["damage_state"]
   if name == "add_firewood":  # the hand was in the fire: same temperatures within 2 %
-    t_m, t_n = np.asarray(ds_m.temperature), np.asarray(ds_n.temperature)
+    t_m, t_n = s_mjx["temperature"], np.asarray(ds_n.temperature)
     assert t_m.max() > 60.0
     np.testing.assert_allclose(t_n, t_m, rtol=0.02, atol=0.5)
   if name == "pour_water":  # the liquid poured alike: wet-particle counts within 10 % of the particles
     p = env.unwrapped.damage_binding.liquid.num_particles
-    assert np.asarray(ds_m.exposure).max() > 0.1 * p
-    np.testing.assert_allclose(np.asarray(ds_n.exposure), np.asarray(ds_m.exposure), atol=0.1 * p)
+    assert s_mjx["exposure"].max() > 0.1 * p
+    np.testing.assert_allclose(np.asarray(ds_n.exposure), s_mjx["exposure"], atol=0.1 * p)
+  ds_m = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).info["damage_state"]  # MJX's structure, no compile
   assert ds_n.thermal is None or ds_n.thermal.source_on.shape == ds_m.thermal.source_on.shape
 
 
