@@ -4,16 +4,16 @@ The default suite spends most of its time compiling MJX programs. On a shared, n
 machine wall times move with the load; the number of programs compiled (and which
 test compiled them) does not. Load it with ``-p benchmarks.compile_stats``::
 
-    JAX_COMPILATION_CACHE_DIR=$(mktemp -d) MJX_DAMAGE_CACHE_DIR=$(mktemp -d) \\
-    COMPILE_STATS_OUT=/tmp/stats.json PYTHONPATH=$PWD \\
-    python -m pytest -q -p benchmarks.compile_stats tests/test_tasks.py
+    XDG_CACHE_HOME=$(mktemp -d) COMPILE_STATS_OUT=/tmp/stats.json PYTHONPATH=$PWD \\
+    .venv/bin/python -m pytest -q -p benchmarks.compile_stats tests/test_task_contract.py
 
-(an empty cache directory: a cold run, as on a fresh clone). Per test phase
+(a fresh ``XDG_CACHE_HOME``: the package's caches start empty, as on a fresh clone;
+``MJX_DAMAGE_CACHE_DIR`` and ``JAX_COMPILATION_CACHE_DIR`` unset). Per test phase
 (``setup`` holds module-scoped fixtures: the first test that uses one pays) it
 records XLA backend compiles that missed the persistent cache (count, seconds,
 program names of those ≥ 1 s), persistent-cache hits, and the phase's wall time.
-The terminal summary prints the 25 costliest phases; ``COMPILE_STATS_OUT`` gets all
-of them as JSON (written through :func:`mjx_damage.io.write_json`).
+The terminal summary prints the totals per test file and the 25 costliest phases;
+``COMPILE_STATS_OUT`` gets every phase and file as JSON (:func:`mjx_damage.io.write_json`).
 Subprocesses the tests start are not counted (their wall time is, in the phase).
 """
 
@@ -82,6 +82,14 @@ def pytest_terminal_summary(terminalreporter):
   w = terminalreporter.write_line
   w(f"compile stats: {tot['compiles']} compiles (cache misses) {tot['compile_s']:.0f} s, "
     f"{tot['hits']} persistent-cache hits, {tot['wall_s']:.0f} s in tests")
+  files: dict = collections.defaultdict(lambda: {"compiles": 0, "compile_s": 0.0, "hits": 0, "wall_s": 0.0})
+  for k, v in _stats.items():
+    f = files[k.split("::")[0]]
+    for key in f:
+      f[key] += v[key]
+  for name, v in sorted(files.items(), key=lambda kv: -kv[1]["wall_s"]):
+    w(f"  {v['wall_s']:7.1f}s wall {v['compiles']:4d} compiles {v['compile_s']:6.1f}s {v['hits']:3d} hits  {name}")
+  w("costliest test phases:")
   for k, v in rows[:25]:
     w(f"  {v['wall_s']:7.1f}s wall {v['compiles']:4d} compiles {v['compile_s']:6.1f}s {v['hits']:3d} hits  {k}")
     for b in v["big"]:
@@ -90,4 +98,4 @@ def pytest_terminal_summary(terminalreporter):
   if out:
     from mjx_damage import io
 
-    io.write_json(out, {"totals": tot, "phases": dict(rows)})
+    io.write_json(out, {"totals": tot, "files": dict(files), "phases": dict(rows)})
