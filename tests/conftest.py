@@ -38,7 +38,7 @@ def _contract_rollout(name):
   """(env, results) of ``len(EPISODES)`` episodes × ``STEPS`` steps of ``tasks.make(name)`` in one
   ``jit(vmap(scan))`` call; results (numpy, leading axis = episode):
 
-  which i32 (policy), reset_key u32[2], obs0 f32[O] / health0 f32[E] (after reset), obs, health (final),
+  which i32 (policy), reset_key u32[2], state0 (the env State after reset), obs0 f32[O] / health0 f32[E], obs, health (final),
   bad bool (some obs, reward, qpos or dynamic damage-state leaf non-finite), lo / hi (min / max link
   and entity health over the steps), rise (largest step-to-step link-health increase), unsanitised
   (steps where the wrapper's ``action_sanitised`` count differs from the non-finite-or-out-of-range
@@ -63,7 +63,7 @@ def _contract_rollout(name):
   def episode(rng, which):
     r0, rp = jax.random.split(rng)
     s = env.reset(r0)
-    start = (s.obs, s.info["entity_health"])
+    start = (s.obs, s.info["entity_health"], s)
 
     def body(carry, k):
       s, bad, lo, hi, rise, unsanitised, dmg = carry
@@ -86,7 +86,7 @@ def _contract_rollout(name):
             jnp.zeros((), jnp.int32), jnp.zeros(len(MODELS)))
     (s, bad, lo, hi, rise, unsanitised, dmg), (succ, acts, h_t, d_t, temp_t, exp_t) = jax.lax.scan(
         body, init, jax.random.split(rp, STEPS))
-    return {"reset_key": r0, "obs0": start[0], "health0": start[1], "obs": s.obs, "health": s.info["entity_health"],
+    return {"reset_key": r0, "state0": start[2], "obs0": start[0], "health0": start[1], "obs": s.obs, "health": s.info["entity_health"],
             "bad": bad, "lo": lo, "hi": hi, "rise": rise, "unsanitised": unsanitised, "completed": jnp.max(succ),
             "damage": dmg, "actions": acts, "health_t": h_t, "damage_t": d_t, "temperature_t": temp_t,
             "exposure_t": exp_t}
