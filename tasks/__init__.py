@@ -23,7 +23,10 @@ default for now, every task's scripted policies are tuned on it — ``"panda"``,
 listing the valid ones.
 
 Adding a task: a module ``tasks/<name>.py`` with a :class:`tasks.base.Task`
-subclass, its scene XML beside it, and one line in ``_REGISTRY`` below.
+subclass, its scene XML beside it, and one line in ``_REGISTRY`` below. The
+default test suite then runs it through tests/test_task_contract.py (one compiled
+rollout: shapes, random and extreme actions, scripted safe/unsafe separation);
+a task's own test file needs only what is particular to it.
 """
 
 from __future__ import annotations

@@ -26,7 +26,10 @@ TRAIN = ["train", "--task", "train.experiments.pusher:PusherEnv", "--num-envs", 
 
 
 def _env(**extra) -> dict:
-  return dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu", **extra)
+  env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu", **extra)
+  if extra.get("MJX_DAMAGE_CACHE_DIR") == "off":  # JAX itself would read the suite's cache dir (conftest.py)
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+  return env
 
 
 def _run(args, cwd, timeout=300, **extra) -> subprocess.CompletedProcess:

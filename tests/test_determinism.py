@@ -91,8 +91,14 @@ def test_chunking_is_bitwise_identical(place_plate):
     assert bitwise_mismatches(ref, run(fns, KEYS, chunks)) == [], chunks
 
 
+@pytest.mark.slow
 def test_batch_size_4_equals_8_bitwise(place_plate):
-  """Env i of a batch of 8 equals env i of a batch of 4 (both halves: same executable, other envs)."""
+  """Env i of a batch of 8 equals env i of a batch of 4 (both halves: same executable, other envs).
+
+  Slow: a batch of 4 is a second compile of the task's rollout (XLA specialises to the batch shape);
+  ``test_batch_size_and_chunking_independence`` (slow) checks the same on place_plate and two more
+  tasks, and the default suite keeps batched = one-by-one on a small scene
+  (tests/test_mjx_scene.py ``test_1024_batched_envs_match_one_by_one``, within 1e-3 health)."""
   fns, ref = place_plate
   for half in (slice(0, 4), slice(4, 8)):
     assert bitwise_mismatches(take(ref, half), run(fns, KEYS[half])) == [], half

@@ -20,17 +20,15 @@ import subprocess
 import sys
 import time
 
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
+import jax
+import numpy as np
+import pytest
 
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-from train import cli, mesh as M  # noqa: E402
-from train.config import PPOConfig  # noqa: E402
-from train.envs import resolve_task  # noqa: E402
-from train.experiments.pusher import PusherEnv  # noqa: E402
-from train.iteration import Trainer  # noqa: E402
+from train import cli, mesh as M
+from train.config import PPOConfig
+from train.envs import resolve_task
+from train.experiments.pusher import PusherEnv
+from train.iteration import Trainer
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TASK = "train.experiments.pusher:PusherEnv"

@@ -14,7 +14,7 @@ from mjx_damage import program_cache as P
 from mjx_damage.wrapper import DamageWrapper
 from tasks.bench_table import table_env
 
-T = 6
+T, EPISODES = 8, 3  # tests/test_eval.py's episode length and count (the same program)
 
 
 @pytest.fixture
@@ -91,14 +91,26 @@ def test_off_returns_the_function(monkeypatch, roots, tmp_path):
   assert how == "off" and call is f
 
 
+def push_policy(env):
+  """tests/test_eval.py's scripted pusher policy, op for op: with its env (below) the plain evaluation
+  is the program test_eval.py compiles, a persistent-cache hit here (one compile fewer in the suite)."""
+  radius = env.unwrapped.radius
+
+  def policy(state, rng):
+    target = state.obs[2:4] / radius
+    return jnp.clip(target + 0.1 * jax.random.normal(rng, (2,)), -1.0, 1.0)
+
+  return policy
+
+
 def test_evaluator_with_program_equals_plain_evaluation(cache, roots):
   """A (tiny) damage-wrapped env: the cached program's per-episode results equal the plain jit's."""
-  env = DamageWrapper(table_env(k=1, n_substeps=2, episode_length=T))
-  policy = E.zero_policy(env.action_size)
-  plain = E.evaluate(env, policy, 4, seed=3, devices=jax.devices()[:1])
-  desc = {"task": "table_k1", "policy": "zero"}
-  first = E.evaluate(env, policy, 4, seed=3, devices=jax.devices()[:1], program=desc, program_roots=roots)
-  second = E.evaluate(env, policy, 4, seed=3, devices=jax.devices()[:1], program=desc, program_roots=roots)
+  env = DamageWrapper(table_env(k=1, n_substeps=2, episode_length=T), terminate_on_destroyed=True)
+  policy = push_policy(env)
+  plain = E.evaluate(env, policy, EPISODES, seed=3, devices=jax.devices()[:1])
+  desc = {"task": "table_k1", "policy": "push"}
+  first = E.evaluate(env, policy, EPISODES, seed=3, devices=jax.devices()[:1], program=desc, program_roots=roots)
+  second = E.evaluate(env, policy, EPISODES, seed=3, devices=jax.devices()[:1], program=desc, program_roots=roots)
   assert (plain["program"], first["program"], second["program"]) == (None, "exported", "loaded")
   for k, v in plain["per_episode"].items():
     np.testing.assert_array_equal(first["per_episode"][k], v)

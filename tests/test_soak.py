@@ -1,7 +1,8 @@
 """benchmarks/soak.py: its on-device checks catch what they claim to, and a small soak of a task passes.
 
 The full soak (every task, the results file) is ``benchmarks/soak.py``; the
-``slow`` test here runs every task at a reduced size.
+``slow`` tests here run it on tasks at a reduced size (the default suite's per-task
+extreme-action checks are tests/test_task_contract.py's).
 """
 
 import importlib.util
@@ -61,8 +62,15 @@ def test_soak_counters_catch_broken_invariants():
   assert broken["particle_violations"] == 0 and broken["sanitise_mismatch"] == 0
 
 
+@pytest.mark.slow
 def test_soak_place_plate_small():
-  """Two envs, 40 steps of 15-step episodes (auto-resets included), 20 % extreme action entries."""
+  """Two envs, 40 steps of 15-step episodes (auto-resets included), 20 % extreme action entries.
+
+  Slow (two compiles of a task program of its own): the default suite covers each part elsewhere —
+  the soak's counters and auto-reset bookkeeping above (DropEnv), and every task, place_plate
+  included, under 20 % extreme action entries with health bounded and never rising, the state
+  finite and the sanitised count exact in tests/test_task_contract.py; ``test_soak_every_task``
+  runs this harness on every task."""
   c = run_soak(tasks.make("place_plate"), envs=2, chunks=2, chunk=20, extreme_frac=0.2, episode_length=15)
   assert c["steps"] == 80 and c["episodes"] == 2 * 2
   assert all(c[k] == 0 for k in soak.COUNTERS), c

@@ -10,17 +10,13 @@ policy run in one compiled ``jit(vmap(scan))`` call per policy (same reset keys 
   safe strategy's, by a margin, and on most of the paired episodes.
 """
 
-import os
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
 
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
-
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-import mjx_damage  # noqa: E402,F401
-import tasks  # noqa: E402
+import mjx_damage  # noqa: F401
+import tasks
 
 GAMMAS = (0.97, 0.99)
 # task -> make() overrides: the setting it is trained in (tasks.RL_SETTINGS)

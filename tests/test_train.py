@@ -10,16 +10,14 @@ import sys
 import types
 import os
 
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-import train  # noqa: E402
-from train import ppo  # noqa: E402
-from train.experiments.pusher import PusherEnv  # noqa: E402
+import train
+from train import ppo
+from train.experiments.pusher import PusherEnv
 
 # 16 envs × 8 steps = 128 env steps per iteration and seed; episodes of 24 steps end every 3 iterations.
 ITER = 128

@@ -6,18 +6,15 @@ with the smallest networks keeps this cheap.
 """
 
 import functools
-import os
 
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
+import jax
+import numpy as np
 
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-
-import mjx_damage  # noqa: E402,F401  (installs the shim)
-from brax.training.agents.ppo import networks as ppo_networks  # noqa: E402
-from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
-from mjx_damage.wrapper import DamageWrapper  # noqa: E402
-from train.experiments.pusher import PusherEnv  # noqa: E402
+import mjx_damage  # noqa: F401  (installs the shim)
+from brax.training.agents.ppo import networks as ppo_networks
+from brax.training.agents.ppo import train as brax_ppo
+from mjx_damage.wrapper import DamageWrapper
+from train.experiments.pusher import PusherEnv
 
 
 def test_brax_ppo_train_runs_through_compat_shim():

@@ -21,7 +21,8 @@ The stand-in is bound only while JAX traces (an instance attribute set and
 removed around the call, inside the traced function), so the env object is
 unchanged outside these two functions and any retrace binds it again.
 ``reset`` is the env's own jitted reset (MJX, once per episode), copied into the
-``MjData``.
+``MjData`` by :func:`put_state` (which takes a one-env state from anywhere, e.g. one
+episode of a batched MJX rollout).
 """
 
 from __future__ import annotations
@@ -116,7 +117,11 @@ def copy_fields(nat: NativeEnv, data: mujoco.MjData) -> dict:
 
 def reset(nat: NativeEnv, data: mujoco.MjData, rng) -> State:
   """Reset the env (its own jitted reset) and put the reset state into ``data``; returns the env state."""
-  state = nat.reset(rng)
+  return put_state(nat, data, nat.reset(rng))
+
+
+def put_state(nat: NativeEnv, data: mujoco.MjData, state: State) -> State:
+  """Put an env state of one env (a reset state, from any source) into ``data``; returns ``state``."""
   d = state.pipeline_state
   mujoco.mj_resetData(nat.model, data)
   for name in ("qpos", "qvel", "act", "ctrl", "mocap_pos", "mocap_quat", "qacc_warmstart", "eq_active"):
