@@ -35,6 +35,11 @@ STRICT = {
     "turn_on_faucet": "faucet_handle",
     "ignite_wood": "agent",
     "prepare_coffee": "coffee_machine",
+    "place_in_microwave": "dish",
+    "serve_pastry": "pastry",
+    "pick_up_scrub": "wineglass",
+    "attach_camera": "camera",
+    "fill_bowl": "agent",
 }
 
 
