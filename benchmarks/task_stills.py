@@ -30,6 +30,7 @@ import os
 import sys
 import time
 
+import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
@@ -136,6 +137,58 @@ def health_text(names, values) -> str:
   return "final health: " + ", ".join(f"{n} {v:.1f}" for n, v in zip(names, values))
 
 
+AZIMUTHS = (135.0, 90.0, 180.0, 45.0, 225.0, 0.0, 270.0, 315.0)  # deg; the first is render's default view
+ELEVATIONS = (-30.0, -50.0)  # deg
+PROBE = (128, 96)  # px of the segmentation probes that pick the camera
+
+
+def entity_pixels(seg: np.ndarray, traj, n: int) -> np.ndarray:
+  """i[n]: pixels of each tracked entity in a geom-id image ``seg`` (i[H, W], −1 = none)."""
+  geom_entity = np.where(traj.geom_link >= 0, traj.link_entity[np.maximum(traj.geom_link, 0)], -1)
+  ids = np.append(geom_entity, -1)[seg]  # seg −1 (background) → −1
+  return np.bincount(ids[ids >= 0], minlength=n)[:n]
+
+
+def choose_camera(model, traj) -> mujoco.MjvCamera:
+  """A free camera that shows every tracked entity in the end states of all envs.
+
+  Looks at the tracked bodies' centre (over the reset and every env's end state)
+  from a distance that spans them, and picks among :data:`AZIMUTHS` ×
+  :data:`ELEVATIONS` the view whose segmentation shows the most of each entity:
+  the score sums, over envs and entities, the entity's visible share of the frame
+  capped at 2 % — so walls or cabinets in front of an entity cost a view, and one
+  large entity cannot outweigh a small one left out. Ties keep the earlier view.
+  """
+  data = mujoco.MjData(model)
+  bodies = np.unique(model.geom_bodyid[traj.geom_link >= 0])
+  pts = []
+  for t, b in [(0, 0)] + [(traj.steps, b) for b in range(traj.num_envs)]:
+    data.qpos[:], data.qvel[:] = traj.qpos[t, b], traj.qvel[t, b]
+    if model.nmocap:
+      data.mocap_pos[:], data.mocap_quat[:] = traj.mocap_pos[t, b], traj.mocap_quat[t, b]
+    mujoco.mj_forward(model, data)
+    pts.append(data.xpos[bodies])
+  pts = np.concatenate(pts)
+  centre = pts.mean(axis=0)
+  spread = float(np.max(np.linalg.norm(pts - centre, axis=1)))
+  n = len(traj.entity_names)
+  cap = 0.02 * PROBE[0] * PROBE[1]
+  best, best_score = None, -1.0
+  for el in ELEVATIONS:
+    for az in AZIMUTHS:
+      cam = mujoco.MjvCamera()
+      mujoco.mjv_defaultFreeCamera(model, cam)
+      cam.lookat[:], cam.distance, cam.azimuth, cam.elevation = centre, max(0.6, 2.6 * spread), az, el
+      score = 0.0
+      for b in range(traj.num_envs):
+        seg = render_frames(model, traj, width=PROBE[0], height=PROBE[1], camera=cam, env_index=b,
+                            times=[-1], segmentation=True)[0]
+        score += float(np.sum(np.minimum(entity_pixels(seg, traj, n), cap)))
+      if score > best_score + 1e-6:
+        best, best_score = cam, score
+  return best
+
+
 def render_task(name: str, *, seed: int, width: int, height: int, steps=None) -> tuple:
   """Roll out safe and unsafe from one reset (one compiled program), render both end states.
 
@@ -148,8 +201,11 @@ def render_task(name: str, *, seed: int, width: int, height: int, steps=None) ->
   model = mj_model_of(env)
   panels, summary = [], {"task": name, "seed": seed, "steps": steps, "dt": traj.dt,
                          "entities": list(traj.entity_names), "policies": {}}
+  camera = choose_camera(model, traj)
+  summary["camera"] = {"lookat": [float(x) for x in camera.lookat], "distance": float(camera.distance),
+                       "azimuth": float(camera.azimuth), "elevation": float(camera.elevation)}
   for b, style in enumerate(STYLES):
-    frame = render_frames(model, traj, width=width, height=height, env_index=b, times=[-1])[0]
+    frame = render_frames(model, traj, width=width, height=height, camera=camera, env_index=b, times=[-1])[0]
     final = [float(x) for x in traj.entity_health[-1, b]]
     completed = bool(np.max(traj.success[:, b]) > 0)
     damage = np.sum(traj.damage[:, b], axis=0) if traj.damage is not None else np.zeros(3)
