@@ -104,3 +104,12 @@ def test_one_task_renders_safe_and_unsafe(tmp_path):
   meta = json.load(open(os.path.join(out, "pick_egg.json")))
   assert set(meta["policies"]) == {"safe", "unsafe"}
   assert "pick_egg.png" in open(os.path.join(out, "index.md")).read()
+
+
+def test_entity_pixels_counts_each_entitys_geoms():
+  from types import SimpleNamespace
+
+  # geoms 0, 1 → link 0 (entity 1), geom 2 → link 1 (entity 0), geom 3 untracked
+  traj = SimpleNamespace(geom_link=np.array([0, 0, 1, -1]), link_entity=np.array([1, 0]))
+  seg = np.array([[0, 1, 2, 3], [-1, -1, 2, 0]])
+  np.testing.assert_array_equal(stills.entity_pixels(seg, traj, 2), [2, 3])
