@@ -176,11 +176,12 @@ def camera_of(model, data, camera, tracked_bodies, extra_geoms=()):
 
 def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int = 480, camera=None,
                   env_index: int = 0, overlay: bool = True, tint: bool = True, particles: bool = True,
-                  segmentation: bool = False) -> np.ndarray:
+                  segmentation: bool = False, times=None) -> np.ndarray:
   """uint8[T + 1, height, width, 3]: env ``env_index`` of ``traj``, tinted, with health bars.
 
   ``particles``: draw the liquid (when the scene has one); heat sources glow
-  with ``tint``.
+  with ``tint``. ``times``: only these recorded steps (ints in [0, T]), in that
+  order: uint8[len(times), height, width, 3] (e.g. ``[-1]``: the end state alone).
 
   ``segmentation=True`` returns instead i32[T + 1, height, width], the geom id
   seen at each pixel (−1: none), from the same camera: which pixels show which
@@ -189,6 +190,13 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
   width, height = positive_int("width", width), positive_int("height", height)
   if not 0 <= env_index < traj.num_envs:
     raise ValueError(f"env_index: must be in [0, {traj.num_envs}), got {env_index}")
+  if times is None:
+    times = range(traj.steps + 1)
+  else:
+    times = [int(t) for t in times]
+    if not times or not all(-(traj.steps + 1) <= t <= traj.steps for t in times):
+      raise ValueError(f"times: recorded steps in [0, {traj.steps}] (negative from the end), got {times}")
+    times = [t % (traj.steps + 1) for t in times]
   ensure_gl()
   model = copy.deepcopy(mj_model)  # its geom colours are overwritten per frame
   # The offscreen buffer must hold the frame; the scene's XML may ask for less.
@@ -210,20 +218,14 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
     renderer.enable_segmentation_rendering()
     overlay = False
   try:
-    frames = np.empty((traj.steps + 1, height, width) + (() if segmentation else (3,)),
+    frames = np.empty((len(times), height, width) + (() if segmentation else (3,)),
                       np.int32 if segmentation else np.uint8)
-    cam = None
     tracked_bodies = np.unique(np.asarray(_body_of_links(model, traj)))
-    for t in range(traj.steps + 1):
-      data.qpos[:] = traj.qpos[t, b]
-      data.qvel[:] = traj.qvel[t, b]
-      if model.nmocap:
-        data.mocap_pos[:] = traj.mocap_pos[t, b]
-        data.mocap_quat[:] = traj.mocap_quat[t, b]
-      mujoco.mj_forward(model, data)
-      if cam is None:  # framed on the reset state and then held still
-        sources = traj.source_geom if traj.source_geom is not None else ()
-        cam = camera_of(model, data, camera, tracked_bodies, sources)
+    _set_state(model, data, traj, 0, b)  # the camera is framed on the reset state and then held still
+    sources = traj.source_geom if traj.source_geom is not None else ()
+    cam = camera_of(model, data, camera, tracked_bodies, sources)
+    for i, t in enumerate(times):
+      _set_state(model, data, traj, t, b)
       rgba = tinted_rgba(base, traj.geom_link, traj.link_health[t, b]) if tint else base
       if tint and traj.source_temperature is not None:
         rgba = glow_rgba(rgba, traj.source_geom, traj.source_temperature[t, b], traj.ambient)
@@ -237,10 +239,20 @@ def render_frames(mj_model, traj: Trajectory, *, width: int = 640, height: int =
       elif overlay:
         headers, readouts, caption = frame_labels(traj, t, b)
         img = draw_health_bars(img, traj.entity_names, traj.entity_health[t, b], caption, readouts, headers)
-      frames[t] = img
+      frames[i] = img
   finally:
     renderer.close()  # free the GL context now, not at interpreter exit
   return frames
+
+
+def _set_state(model, data, traj: Trajectory, t: int, b: int) -> None:
+  """Load recorded step ``t`` of env ``b`` into ``data`` and run ``mj_forward``."""
+  data.qpos[:] = traj.qpos[t, b]
+  data.qvel[:] = traj.qvel[t, b]
+  if model.nmocap:
+    data.mocap_pos[:] = traj.mocap_pos[t, b]
+    data.mocap_quat[:] = traj.mocap_quat[t, b]
+  mujoco.mj_forward(model, data)
 
 
 def _body_of_links(model, traj):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-from typing import Callable, Optional
+from typing import Optional
 
 import jax
 import jax.numpy as jnp
@@ -111,39 +111,47 @@ def _record(state, done_before):
 
 
 class _Programs:
-  """The compiled reset and step of (env, policy, num_envs), reused across calls."""
+  """The compiled reset and step of (env, policies, num_envs), reused across calls.
 
-  def __init__(self, env, policy: Callable, num_envs: int):
-    self.env, self.policy, self.num_envs = env, policy, num_envs
+  Env b runs ``policies[b % len(policies)]`` (a ``lax.switch`` on b: one program
+  for every policy, e.g. a task's safe and unsafe scripts side by side).
+  """
 
-    def reset_one(key):
-      reset_key, act_key = jax.random.split(key)
+  def __init__(self, env, policies: tuple, num_envs: int):
+    self.env, self.policies, self.num_envs = env, policies, num_envs
+
+    def policy(state, rng, b):
+      if len(policies) == 1:
+        return policies[0](state, rng)
+      return jax.lax.switch(b % len(policies), policies, state, rng)
+
+    def reset_one(reset_key):
       state = env.reset(reset_key)
       z = jnp.zeros((), jnp.float32)
-      return state, act_key, _record(state, z)
+      return state, _record(state, z)
 
-    def step_one(state, act_key, done, t):
-      nxt = env.step(state, policy(state, jax.random.fold_in(act_key, t)))
+    def step_one(state, act_key, done, b, t):
+      nxt = env.step(state, policy(state, jax.random.fold_in(act_key, t), b))
       # An env whose episode ended stays frozen at its final state (as train.evaluate does).
-      nxt = jax.tree.map(lambda a, b: jnp.where(done > 0, b, a), nxt, state)
+      nxt = jax.tree.map(lambda new, old: jnp.where(done > 0, old, new), nxt, state)
       rec = _record(nxt, done)
       return nxt, rec["done"], rec
 
     self.reset = jax.jit(jax.vmap(reset_one))
-    self.step = jax.jit(jax.vmap(step_one, in_axes=(0, 0, 0, None)))
+    self.step = jax.jit(jax.vmap(step_one, in_axes=(0, 0, 0, 0, None)))
 
 
 _PROGRAMS: "collections.OrderedDict" = collections.OrderedDict()
 _MAX_PROGRAMS = 4  # a few (env, policy) pairs stay compiled, e.g. safe and unsafe of one task
 
 
-def _programs(env, policy, num_envs) -> _Programs:
-  # Keyed by identity; the entry keeps env and policy alive so their ids are not reused.
-  key = (id(env), id(policy), num_envs)
+def _programs(env, policies: tuple, num_envs) -> _Programs:
+  # Keyed by identity; the entry keeps env and policies alive so their ids are not reused.
+  key = (id(env), tuple(id(p) for p in policies), num_envs)
   if key in _PROGRAMS:
     _PROGRAMS.move_to_end(key)
   else:
-    _PROGRAMS[key] = _Programs(env, policy, num_envs)
+    _PROGRAMS[key] = _Programs(env, policies, num_envs)
     while len(_PROGRAMS) > _MAX_PROGRAMS:
       _PROGRAMS.popitem(last=False)
   return _PROGRAMS[key]
@@ -177,25 +185,36 @@ def mj_model_of(env):
   raise ValueError("env: exposes no mj_model (needed to render)")
 
 
-def rollout(env, policy: Callable, *, steps: int, seed: int = 0, num_envs: int = 1) -> Trajectory:
+def rollout(env, policy, *, steps: int, seed: int = 0, num_envs: int = 1,
+            same_reset: bool = False) -> Trajectory:
   """Run ``num_envs`` episodes of ``steps`` control steps through one compiled step; record them.
 
   ``env``: a :class:`~mjx_damage.wrapper.DamageWrapper`-wrapped env (e.g. ``tasks.make``);
-  ``policy(state, rng) -> action`` for one env. Env b's reset and action keys
-  come from ``split(PRNGKey(seed), num_envs)[b]``, as in :mod:`train.evaluate`.
+  ``policy(state, rng) -> action`` for one env, or a sequence of such policies:
+  env b then runs ``policy[b % len(policy)]``, all in one compiled program.
+  Env b's reset and action keys come from ``split(PRNGKey(seed), num_envs)[b]``,
+  as in :mod:`train.evaluate`; with ``same_reset`` every env resets from env 0's
+  reset key (the same randomised episode, e.g. to compare policies from one start).
   """
   steps, num_envs = positive_int("steps", steps), positive_int("num_envs", num_envs)
   if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
     raise ValueError(f"seed: must be an integer, got {seed!r}")
-  if not callable(policy):
-    raise ValueError(f"policy: must be callable policy(state, rng) -> action, got {policy!r}")
+  policies = tuple(policy) if isinstance(policy, (list, tuple)) else (policy,)
+  if not policies or not all(callable(p) for p in policies):
+    raise ValueError(f"policy: must be a callable policy(state, rng) -> action or a non-empty sequence of them, "
+                     f"got {policy!r}")
   binding = binding_of(env)
-  prog = _programs(env, policy, num_envs)
-  state, act_keys, rec = prog.reset(jax.random.split(jax.random.PRNGKey(int(seed)), num_envs))
+  prog = _programs(env, policies, num_envs)
+  keys = jax.vmap(jax.random.split)(jax.random.split(jax.random.PRNGKey(int(seed)), num_envs))
+  reset_keys, act_keys = keys[:, 0], keys[:, 1]
+  if same_reset:
+    reset_keys = jnp.broadcast_to(reset_keys[0], reset_keys.shape)
+  state, rec = prog.reset(reset_keys)
+  index = jnp.arange(num_envs, dtype=jnp.int32)
   done = rec["done"]
   recs = [jax.device_get(rec)]
   for t in range(steps):
-    state, done, rec = prog.step(state, act_keys, done, t)
+    state, done, rec = prog.step(state, act_keys, done, index, t)
     recs.append(jax.device_get(rec))
   stacked = {k: np.stack([np.asarray(r[k]) for r in recs]) for k in recs[0]}
   params = jax.device_get(state.info["damage_state"].params)

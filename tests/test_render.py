@@ -219,6 +219,26 @@ def test_no_tint_where_health_stays_100(drop):
   assert redness(res.frames[b][-1][m]) < 10
 
 
+def test_selected_times_are_the_same_frames(drop):
+  env, res, _, _ = drop
+  model = R.mj_model_of(env)
+  b = DAMAGED_ENV
+  ends = R.render_frames(model, res.trajectory, width=W, height=H, env_index=b, times=[0, -1, 4])
+  np.testing.assert_array_equal(ends, res.frames[b][[0, STEPS, 4]])  # same camera (framed at reset), same overlay
+  with pytest.raises(ValueError, match="times"):
+    R.render_frames(model, res.trajectory, width=W, height=H, times=[STEPS + 1])
+
+
+def test_same_reset_starts_every_env_from_env_0s_episode(drop):
+  env = drop[0]
+  zero = lambda s, k: jnp.zeros((0,))  # noqa: E731 (the drop scene has no actions)
+  own = R.rollout(env, zero, steps=1, seed=SEED, num_envs=2)
+  same = R.rollout(env, zero, steps=1, seed=SEED, num_envs=2, same_reset=True)  # the same compiled program
+  assert not np.allclose(own.qpos[0, 0], own.qpos[0, 1])  # by default: two different episodes
+  np.testing.assert_array_equal(same.qpos[0, 1], same.qpos[0, 0])
+  np.testing.assert_array_equal(same.qpos[0, 0], own.qpos[0, 0])  # env 0's episode is unchanged
+
+
 def test_video_files_decode(drop, tmp_path):
   _, res, _, out = drop
   assert [os.path.basename(p) for p in res.paths] == ["drop.mp4"] + [f"drop_env{b}.mp4" for b in range(1, NUM_ENVS)]
@@ -278,6 +298,16 @@ def test_wet_rollout_records_particles_and_heat(wet):
   text = "\n".join(caption)
   assert "episode damage" in text and "hp" in text and "keeps counting after health 0" in text
   assert "hot 200 °C" in text and f"liquid: {WET_P} particles" in text and "by model: mechanical" in text
+
+
+def test_env_b_runs_policy_b_of_a_sequence(wet):
+  env, res = wet
+  tilt, hold = (lambda s, k: jnp.full((1,), 2.0)), (lambda s, k: jnp.zeros((1,)))
+  traj = R.rollout(env, [tilt, hold], steps=3, seed=0, num_envs=2, same_reset=True)
+  np.testing.assert_allclose(traj.qpos[:, 0], res.trajectory.qpos[:, 0], atol=1e-5)  # env 0: the tilt, as alone
+  assert abs(traj.qpos[-1, 0, 0] - traj.qpos[-1, 1, 0]) > 0.05  # env 1 held the glass upright
+  with pytest.raises(ValueError, match="policy"):
+    R.rollout(env, [], steps=1)
 
 
 def test_particles_are_drawn(wet):
