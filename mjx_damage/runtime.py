@@ -30,10 +30,10 @@ new XLA:CPU fusion emitters make MJX's forward kinematics cost exponential
 in the depth of a kinematic chain (``mjx.kinematics`` composes each body's
 quaternion with its parent's level by level, and the emitted loop fusions
 recompute the parent's components for every component they read). A chain
-of 6 hinges takes 6 ms per call of 4 environments, 8 hinges 1.6 s; the
-Panda's 7 joints + fingers made one control step of place_plate 200× slower
-than the gripper's. With the older elemental emitters the 8-hinge chain takes
-1.8 ms (``benchmarks/panda_speed.py``, ``docs/panda_speed.md``).
+of 6 hinges takes 3 ms per call of 4 environments, 8 hinges 0.65 s; the
+Panda's 7 joints + fingers made a place_plate control step ≈ 180× slower than
+with the older elemental emitters, which take 0.35 ms for the 8-hinge chain
+(``benchmarks/panda_speed.py``, ``docs/panda_speed.md``).
 
 **Persistent compilation cache** (``MJX_DAMAGE_CACHE_DIR=<dir>`` to move it,
 ``MJX_DAMAGE_CACHE_DIR=off`` to switch it off). Compiling a task step takes
