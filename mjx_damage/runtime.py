@@ -2,7 +2,10 @@
 
 Two settings, each with an environment variable to change or switch it off:
 
-**XLA:CPU scheduler** (``MJX_DAMAGE_XLA_CPU_FIX=0`` to leave XLA_FLAGS alone).
+**XLA:CPU flags** (``MJX_DAMAGE_XLA_CPU_FIX=0`` to leave XLA_FLAGS alone): two, each
+added unless ``XLA_FLAGS`` already names it. Both change only the CPU compiler.
+
+*Scheduler.*
 jaxlib 0.10.2's LAPACK kernels (``lapack_spotrf_ffi``, the batched Cholesky
 that MJX's Newton solver calls every substep) split their batch into tasks on
 XLA's intra-op thread pool and then *block* until those tasks finish
@@ -22,6 +25,16 @@ package sets the flag. It only changes the CPU compiler; GPU runs are
 unaffected. ``benchmarks/cpu_stall.py`` loops the triggering calls under a
 watchdog; ``docs/cpu_stall.md`` has the evidence.
 
+*Fusion emitters.* ``--xla_cpu_use_fusion_emitters=false``: jaxlib 0.10.2's
+new XLA:CPU fusion emitters make MJX's forward kinematics cost exponential
+in the depth of a kinematic chain (``mjx.kinematics`` composes each body's
+quaternion with its parent's level by level, and the emitted loop fusions
+recompute the parent's components for every component they read). A chain
+of 6 hinges takes 3 ms per call of 4 environments, 8 hinges 0.65 s; the
+Panda's 7 joints + fingers made a place_plate control step ≈ 180× slower than
+with the older elemental emitters, which take 0.35 ms for the 8-hinge chain
+(``benchmarks/panda_speed.py``, ``docs/panda_speed.md``).
+
 **Persistent compilation cache** (``MJX_DAMAGE_CACHE_DIR=<dir>`` to move it,
 ``MJX_DAMAGE_CACHE_DIR=off`` to switch it off). Compiling a task step takes
 15–30 s on a laptop CPU; with JAX's persistent cache the second run of the same
@@ -39,7 +52,12 @@ import sys
 import warnings
 
 CPU_SCHEDULER_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
-_FLAG_NAME = CPU_SCHEDULER_FLAG.split("=")[0]
+CPU_FUSION_FLAG = "--xla_cpu_use_fusion_emitters=false"
+CPU_FLAGS = (CPU_SCHEDULER_FLAG, CPU_FUSION_FLAG)
+
+
+def _name(flag: str) -> str:
+  return flag.split("=")[0]
 
 
 def _off(value: str | None) -> bool:
@@ -53,14 +71,15 @@ def backends_started() -> bool:
 
 
 def xla_flags_with_cpu_fix(flags: str) -> str:
-  """``flags`` with the scheduler flag added, unless the user already chose a value for it."""
-  if _FLAG_NAME in flags:
-    return flags
-  return (flags + " " + CPU_SCHEDULER_FLAG).strip()
+  """``flags`` with each of :data:`CPU_FLAGS` added, unless the user already chose a value for it."""
+  for flag in CPU_FLAGS:
+    if _name(flag) not in flags:
+      flags = (flags + " " + flag).strip()
+  return flags
 
 
 def configure_xla_cpu() -> bool:
-  """Add the scheduler flag to ``XLA_FLAGS``; True when the process will run with it.
+  """Add :data:`CPU_FLAGS` to ``XLA_FLAGS``; True when the process will run with both.
 
   Warns (once, naming the variable to set) when a JAX backend started before
   :mod:`mjx_damage` was imported, since XLA reads its flags only then.
@@ -68,17 +87,19 @@ def configure_xla_cpu() -> bool:
   if _off(os.environ.get("MJX_DAMAGE_XLA_CPU_FIX")):
     return False
   flags = os.environ.get("XLA_FLAGS", "")
-  if _FLAG_NAME in flags:
-    return CPU_SCHEDULER_FLAG in flags
+  if all(_name(f) in flags for f in CPU_FLAGS):
+    return all(f in flags for f in CPU_FLAGS)
   if backends_started():
     warnings.warn(
         "mjx_damage was imported after JAX started its backends, so it could not set "
-        f"XLA_FLAGS={CPU_SCHEDULER_FLAG}; batched MJX calls on CPU can deadlock without it. "
+        f"XLA_FLAGS='{' '.join(CPU_FLAGS)}'; batched MJX calls on CPU can deadlock without the first, "
+        "and deep kinematic chains (the Panda) run 100× slower without the second. "
         "Import mjx_damage first, or export that XLA_FLAGS value before starting Python.",
         RuntimeWarning, stacklevel=3)
     return False
-  os.environ["XLA_FLAGS"] = xla_flags_with_cpu_fix(flags)
-  return True
+  flags = xla_flags_with_cpu_fix(flags)
+  os.environ["XLA_FLAGS"] = flags
+  return all(f in flags for f in CPU_FLAGS)
 
 
 def cache_dir() -> str | None:

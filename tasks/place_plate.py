@@ -250,7 +250,11 @@ class PlacePlate(Task):
         # and once the plate has stopped swinging in the compliant grip (it would keep its sideways speed)
         calm = (jnp.linalg.norm(self.robot.eef_vel(d)) < 0.05) & (jnp.linalg.norm(d.qvel[self._pv : self._pv + 3]) < 0.05)
         at_height = (e[2] > carry_z - 0.01) & calm
-        a_over = R.action(R.move_toward(e, carry), jnp.where(at_height, opened, closed))
+        # once the fingers have opened past the plate's width, keep opening: the slipping plate makes
+        # `calm` false again, and re-closing on it while it falls spins it over (the Panda's plate then
+        # lands on its edge or upside down and is never placed)
+        opening = g > 2 * self.plate_half_y + 0.002
+        a_over = R.action(R.move_toward(e, carry), jnp.where(at_height | opening, opened, closed))
       a_carry = jnp.where(over_goal, a_over, R.action(R.move_toward(e, tgt_carry), closed))
 
       # 3. after the release: lift away with the gripper open.

@@ -25,15 +25,16 @@ def _loop(checks: str, repeats: int, calls: int, timeout: float):
   assert "STALLED" not in r.stdout
 
 
-def test_package_sets_the_cpu_scheduler_flag():
+def test_package_sets_the_cpu_flags():
   code = "import mjx_damage, os; print(os.environ['XLA_FLAGS'])"
   env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "MJX_DAMAGE_XLA_CPU_FIX")}
   out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
   assert "--xla_cpu_enable_concurrency_optimized_scheduler=false" in out
-  # a user's own choice for the flag is kept
+  assert "--xla_cpu_use_fusion_emitters=false" in out
+  # a user's own choice for a flag is kept, the other one is still added
   env["XLA_FLAGS"] = "--xla_cpu_enable_concurrency_optimized_scheduler=true"
   out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-  assert out.strip() == "--xla_cpu_enable_concurrency_optimized_scheduler=true"
+  assert out.split() == ["--xla_cpu_enable_concurrency_optimized_scheduler=true", "--xla_cpu_use_fusion_emitters=false"]
 
 
 def test_import_after_backend_start_warns():
