@@ -99,7 +99,7 @@ class TurnOnMicrowave(Task):
 
     def act(state, rng):
       d = state.pipeline_state
-      e, q = robot.eef_pos(d), self.depth(d)
+      e = robot.eef_pos(d)
       touch = self.press_point(0.0)
       pre = touch - jnp.array([0.05, 0.0, 0.0])
       lined_up = (jnp.linalg.norm(e[1:] - pre[1:]) < 0.004) & (e[0] > pre[0] - 0.01)
