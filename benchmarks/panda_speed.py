@@ -48,8 +48,8 @@ def _load() -> float:
 
 
 def _chain_xml(n: int) -> str:
-  body = "".join(f'<body pos="0 0 0.1" quat="0.7071068 0.7071068 0 0"><joint type="hinge" axis="0 0 1"/>'
-                 f'<geom type="capsule" size="0.02" fromto="0 0 0 0 0 0.1"/>' for _ in range(n))
+  body = "".join('<body pos="0 0 0.1" quat="0.7071068 0.7071068 0 0"><joint type="hinge" axis="0 0 1"/>'
+                 '<geom type="capsule" size="0.02" fromto="0 0 0 0 0 0.1"/>' for _ in range(n))
   return f"<mujoco><worldbody>{body}{'</body>' * n}</worldbody></mujoco>"
 
 
