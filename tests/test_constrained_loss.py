@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from brax.training import types
+from brax.training.acme import running_statistics
 
 import train
 from train import constrained_loss as CL
@@ -21,8 +22,6 @@ CFG = PPOConfig(policy_hidden_sizes=(8,), value_hidden_sizes=(8,), cost_critic=T
 def setup():
   net = N.make_networks(O, A, CFG)
   params = N.init_params(net, CFG, A, jax.random.PRNGKey(0))
-  from brax.training.acme import running_statistics
-
   norm = running_statistics.init_state(jnp.zeros((O,), jnp.float32))
   k = jax.random.split(jax.random.PRNGKey(1), 6)
   obs = jax.random.normal(k[0], (B, T, O))
@@ -46,8 +45,6 @@ def setup():
 
 def test_critic_has_two_heads(setup):
   net, params, data, _ = setup
-  from brax.training.acme import running_statistics
-
   v = net.value_network.apply(running_statistics.init_state(jnp.zeros((O,))), params.value, data.observation)
   assert v.shape == (B, T, 2)
 

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import train
+from train import multipliers as M
 from train import ppo
 from train.experiments.pusher import PusherEnv
 
@@ -164,8 +165,6 @@ def test_pid_multiplier_run_stays_in_range(env):
 def test_budget_curriculum_run(env):
   """A budget curriculum in the same compiled iteration (its length is data): ĉ_t falls from the first
   measured episode cost to ĉ = 0 over 6 iterations, then stays there."""
-  from train import multipliers as M
-
   kw = dict(seeds=SEEDS, budget=0.0, lagrange_lr=0.01, budget_anneal_steps=6 * ITER, **TINY)
   for iters, done in ((5, False), (10, True)):
     ts = train.train(env, num_timesteps=iters * ITER, **kw).train_state

@@ -231,10 +231,10 @@ class Trainer:
     return jax.lax.scan(functools.partial(self._minibatch, normalizer, weights), carry,
                         (shuffled, jax.random.split(k_loss, n_mb)))
 
-  def update(self, ts: TrainState, data: types.Transition, lam=None):
-    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order).
-    ``lam``: the λ the data was collected under (default the state's)."""
-    weights = (ts.damage_weight, ts.multiplier.lam if lam is None else lam)
+  def update(self, ts: TrainState, data: types.Transition):
+    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order); the
+    cost critic's loss mixes with the state's w and λ (the λ the data was collected under)."""
+    weights = (ts.damage_weight, ts.multiplier.lam)
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
     if self.cfg.normalize_observations:
@@ -270,7 +270,7 @@ class Trainer:
     cost_estimate = jnp.where(n > 0, ended["cost"] / jnp.maximum(n, 1.0), ts.cost_estimate)
     has_estimate = jnp.maximum(ts.has_cost_estimate, (n > 0).astype(jnp.float32))
     mult = M.update(ts.multiplier, ts.multiplier_params, cost_estimate, has_estimate)
-    ts, loss_metrics = self.update(ts, data, lam)
+    ts, loss_metrics = self.update(ts, data)
     ts = ts.replace(multiplier=mult, cost_estimate=cost_estimate, has_cost_estimate=has_estimate,
                     iteration=ts.iteration + 1)
     metrics = {f"ended_{k}": v for k, v in ended.items()}
