@@ -83,6 +83,9 @@ def method_spec(name: str, args) -> dict:
   }[name]
   if args.cost_critic and name not in ("task_only", "paper_task_only"):
     spec = dict(spec, label=spec["label"] + " + cost critic", cost_critic=True)
+  if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
+    spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
+                init_log_std=args.init_log_std)
   return spec
 
 
@@ -109,6 +112,9 @@ def parse(argv):
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
+  p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
+                 help="non-paper methods: initial policy log-std of the arm and the gripper (last action) "
+                      "dimensions, e.g. --init-log-std=-0.5,-1.5 (the paper's); default: brax's init")
   p.add_argument("--budget-anneal-steps", type=float, default=6e6,
                  help="*_curriculum methods: env steps per seed over which the budget falls from the first "
                       "measured episode cost to --budget (train.multipliers)")
@@ -138,6 +144,14 @@ def parse(argv):
     p.error(f"--seeds: distinct integers, got {args.seeds}")
   if args.budget_seconds <= 0:
     p.error("--budget-seconds: must be > 0")
+  if args.init_log_std is not None:
+    try:
+      v = tuple(float(x) for x in args.init_log_std.split(","))
+    except ValueError:
+      v = ()
+    if len(v) != 2 or not all(-10.0 <= x <= 2.0 for x in v):
+      p.error(f"--init-log-std: two numbers ARM,GRIPPER in [-10, 2], got {args.init_log_std!r}")
+    args.init_log_std = v
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
   return args
