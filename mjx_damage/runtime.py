@@ -33,7 +33,9 @@ recompute the parent's components for every component they read). A chain
 of 6 hinges takes 3 ms per call of 4 environments, 8 hinges 0.65 s; the
 Panda's 7 joints + fingers made a place_plate control step ≈ 180× slower than
 with the older elemental emitters, which take 0.35 ms for the 8-hinge chain
-(``benchmarks/panda_speed.py``, ``docs/panda_speed.md``).
+(``benchmarks/panda_speed.py``, ``docs/panda_speed.md``). jaxlib 0.11 no longer
+knows this flag and aborts the process on an unknown XLA flag, so it is added
+only for jaxlib < 0.11 (:func:`cpu_flags`).
 
 **Persistent compilation cache** (``MJX_DAMAGE_CACHE_DIR=<dir>`` to move it,
 ``MJX_DAMAGE_CACHE_DIR=off`` to switch it off). Compiling a task step takes
@@ -54,6 +56,24 @@ import warnings
 CPU_SCHEDULER_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
 CPU_FUSION_FLAG = "--xla_cpu_use_fusion_emitters=false"
 CPU_FLAGS = (CPU_SCHEDULER_FLAG, CPU_FUSION_FLAG)
+# Newest jaxlib (major, minor) whose XLA still parses the flag; None: every version we support.
+_LAST_JAXLIB = {CPU_SCHEDULER_FLAG: None, CPU_FUSION_FLAG: (0, 10)}
+
+
+def _jaxlib_version() -> tuple[int, int] | None:
+  from importlib import metadata
+  try:
+    major, minor = metadata.version("jaxlib").split(".")[:2]
+    return int(major), int(minor)
+  except (metadata.PackageNotFoundError, ValueError):
+    return None
+
+
+def cpu_flags(version: tuple[int, int] | None = None) -> tuple[str, ...]:
+  """The :data:`CPU_FLAGS` that jaxlib ``version`` (default: the installed one) knows; XLA aborts on others."""
+  version = _jaxlib_version() if version is None else version
+  return tuple(f for f in CPU_FLAGS
+               if _LAST_JAXLIB[f] is None or version is None or version <= _LAST_JAXLIB[f])
 
 
 def _name(flag: str) -> str:
@@ -70,36 +90,37 @@ def backends_started() -> bool:
   return bool(xb is not None and getattr(xb, "_backends", None))
 
 
-def xla_flags_with_cpu_fix(flags: str) -> str:
-  """``flags`` with each of :data:`CPU_FLAGS` added, unless the user already chose a value for it."""
-  for flag in CPU_FLAGS:
+def xla_flags_with_cpu_fix(flags: str, wanted: tuple[str, ...] = CPU_FLAGS) -> str:
+  """``flags`` with each of ``wanted`` added, unless the user already chose a value for it."""
+  for flag in wanted:
     if _name(flag) not in flags:
       flags = (flags + " " + flag).strip()
   return flags
 
 
 def configure_xla_cpu() -> bool:
-  """Add :data:`CPU_FLAGS` to ``XLA_FLAGS``; True when the process will run with both.
+  """Add :func:`cpu_flags` to ``XLA_FLAGS``; True when the process will run with all of them.
 
   Warns (once, naming the variable to set) when a JAX backend started before
   :mod:`mjx_damage` was imported, since XLA reads its flags only then.
   """
   if _off(os.environ.get("MJX_DAMAGE_XLA_CPU_FIX")):
     return False
+  wanted = cpu_flags()
   flags = os.environ.get("XLA_FLAGS", "")
-  if all(_name(f) in flags for f in CPU_FLAGS):
-    return all(f in flags for f in CPU_FLAGS)
+  if all(_name(f) in flags for f in wanted):
+    return all(f in flags for f in wanted)
   if backends_started():
     warnings.warn(
         "mjx_damage was imported after JAX started its backends, so it could not set "
-        f"XLA_FLAGS='{' '.join(CPU_FLAGS)}'; batched MJX calls on CPU can deadlock without the first, "
+        f"XLA_FLAGS='{' '.join(wanted)}'; batched MJX calls on CPU can deadlock without the first, "
         "and deep kinematic chains (the Panda) run 100× slower without the second. "
         "Import mjx_damage first, or export that XLA_FLAGS value before starting Python.",
         RuntimeWarning, stacklevel=3)
     return False
-  flags = xla_flags_with_cpu_fix(flags)
+  flags = xla_flags_with_cpu_fix(flags, wanted)
   os.environ["XLA_FLAGS"] = flags
-  return all(f in flags for f in CPU_FLAGS)
+  return all(f in flags for f in wanted)
 
 
 def cache_dir() -> str | None:

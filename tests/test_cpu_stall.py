@@ -37,6 +37,14 @@ def test_package_sets_the_cpu_flags():
   assert out.split() == ["--xla_cpu_enable_concurrency_optimized_scheduler=true", "--xla_cpu_use_fusion_emitters=false"]
 
 
+def test_flags_only_for_jaxlibs_that_know_them():
+  # jaxlib 0.11's XLA aborts the process on an unknown flag: the fusion-emitter flag is gone there
+  from mjx_damage import runtime
+  assert runtime.cpu_flags((0, 10)) == runtime.CPU_FLAGS
+  assert runtime.cpu_flags((0, 11)) == (runtime.CPU_SCHEDULER_FLAG,)
+  assert runtime.cpu_flags((1, 0)) == (runtime.CPU_SCHEDULER_FLAG,)
+
+
 def test_import_after_backend_start_warns():
   code = ("import jax, warnings; jax.devices(); warnings.simplefilter('error');\n"
           "try:\n  import mjx_damage\nexcept RuntimeWarning as e:\n  print('warned', e)")
