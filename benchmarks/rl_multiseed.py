@@ -83,6 +83,14 @@ def method_spec(name: str, args) -> dict:
   }[name]
   if args.cost_critic and name not in ("task_only", "paper_task_only"):
     spec = dict(spec, label=spec["label"] + " + cost critic", cost_critic=True)
+  if name in ("lagrangian", "pid", "lagrangian_curriculum", "pid_curriculum"):
+    gains = dict(lagrange_init=args.lagrange_init, lagrange_lr=args.lagrange_lr, pid_kp=args.pid_gains[0],
+                 pid_ki=args.pid_gains[1], pid_kd=args.pid_gains[2])
+    default = dict(zip(gains, (0.0, 0.1, 0.1, 0.01, 0.05)))  # train/config.py's
+    if gains != default:
+      tune = f"λ0={args.lagrange_init:g}, " + (f"lr={args.lagrange_lr:g}" if spec["multiplier"] == "lagrangian"
+                                               else "K=" + "/".join(f"{g:g}" for g in args.pid_gains))
+      spec = dict(spec, label=spec["label"].replace(")", f"; {tune})", 1), **gains)
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
@@ -112,6 +120,9 @@ def parse(argv):
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
+  p.add_argument("--lagrange-init", type=float, default=0.0, help="Lagrangian methods: initial λ")
+  p.add_argument("--lagrange-lr", type=float, default=0.1, help="plain Lagrangian: dual step per health point of error")
+  p.add_argument("--pid-gains", default="0.1,0.01,0.05", metavar="KP,KI,KD", help="PID-Lagrangian gains")
   p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
                  help="non-paper methods: initial policy log-std of the arm and the gripper (last action) "
                       "dimensions, e.g. --init-log-std=-0.5,-1.5 (the paper's); default: brax's init")
@@ -144,6 +155,15 @@ def parse(argv):
     p.error(f"--seeds: distinct integers, got {args.seeds}")
   if args.budget_seconds <= 0:
     p.error("--budget-seconds: must be > 0")
+  try:
+    args.pid_gains = tuple(float(x) for x in args.pid_gains.split(","))
+  except ValueError:
+    args.pid_gains = ()
+  if len(args.pid_gains) != 3 or not all(g >= 0 for g in args.pid_gains):
+    p.error(f"--pid-gains: three numbers KP,KI,KD >= 0, got {args.pid_gains!r}")
+  for flag, v in (("--lagrange-init", args.lagrange_init), ("--lagrange-lr", args.lagrange_lr)):
+    if not v >= 0:
+      p.error(f"{flag}: must be >= 0, got {v}")
   if args.init_log_std is not None:
     try:
       v = tuple(float(x) for x in args.init_log_std.split(","))
