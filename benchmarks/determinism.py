@@ -86,6 +86,9 @@ def take(tree, idx):
   return jax.tree.map(lambda x: np.asarray(x)[idx], tree)
 
 
+MAX_PATHS = 12  # differing leaf paths kept per check in the report
+
+
 def bitwise_mismatches(a, b) -> list:
   """Paths of the leaves whose bytes differ (NaN payloads and the sign of zero included)."""
   out = []
@@ -119,12 +122,15 @@ def check_task(name: str, envs: int, steps: int, seed: int, strict: bool) -> dic
           "chunked": run(fns, keys, split)}
   checks = {}
   for k, got in outs.items():
-    checks[k] = {"bitwise": not bitwise_mismatches(ref, got), "max_abs_diff": max_diffs(ref, got)}
+    bad = bitwise_mismatches(ref, got)
+    checks[k] = {"bitwise": not bad, "max_abs_diff": max_diffs(ref, got), "differing_leaves": bad[:MAX_PATHS]}
   h = envs // 2
   halves = [run(fns, keys[sl], (steps,)) for sl in (slice(0, h), slice(h, envs))]
-  bit = all(not bitwise_mismatches(take(ref, sl), got) for sl, got in zip((slice(0, h), slice(h, envs)), halves))
+  bad = sorted({p for sl, got in zip((slice(0, h), slice(h, envs)), halves) for p in bitwise_mismatches(take(ref, sl), got)})
+  bit = not bad
   diffs = [max_diffs(take(ref, sl), got) for sl, got in zip((slice(0, h), slice(h, envs)), halves)]
-  checks["half_batch"] = {"bitwise": bit, "max_abs_diff": {k: max(d[k] for d in diffs) for k in diffs[0]}}
+  checks["half_batch"] = {"bitwise": bit, "max_abs_diff": {k: max(d[k] for d in diffs) for k in diffs[0]},
+                          "differing_leaves": bad[:MAX_PATHS]}
   tol = TOL_LIQUID if env.unwrapped.damage_binding.liquid is not None else TOL
   for k, c in checks.items():
     if strict or k in ("rerun", "chunked"):
@@ -160,6 +166,11 @@ def report_md(res: dict) -> str:
     c = r["checks"]
     lines.append(f"| {r['task']} | {r['envs']} × {r['steps']} | {cell(c['rerun'])} | {cell(c['recompiled'])} | "
                  f"{cell(c['chunked'])} | {cell(c['half_batch'])} | {'PASS' if r['ok'] else 'FAIL'} |")
+  lines += ["", "Leaves that differ bitwise (first few per check), where any:", ""]
+  for r in res["tasks"]:
+    for k, c in r["checks"].items():
+      if c.get("differing_leaves"):
+        lines.append(f"- {r['task']} / {k}: " + ", ".join(f"`{p}`" for p in c["differing_leaves"]))
   lines += ["", f"Strict (every check bitwise): {res['strict']}. Result: {'PASS' if res['ok'] else 'FAIL'}", ""]
   return "\n".join(lines)
 
