@@ -1,0 +1,50 @@
+"""benchmarks/rl_multiseed.py's command line, without training: bad values stop at parse time, the
+tuning flags reach every Lagrangian method's train() keywords, and the defaults leave earlier commands'
+methods unchanged (so committed rows stay reproducible)."""
+
+import os
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+
+import rl_multiseed  # noqa: E402
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["--init-log-std=-0.5"], "--init-log-std"),
+    (["--init-log-std=a,b"], "--init-log-std"),
+    (["--init-log-std=-0.5,5"], "--init-log-std"),
+    (["--pid-gains", "0.1,0.01"], "--pid-gains"),
+    (["--pid-gains", "0.1,-1,0"], "--pid-gains"),
+    (["--lagrange-lr", "nan"], "--lagrange-lr"),
+    (["--lagrange-init", "-1"], "--lagrange-init"),
+    (["--methods", "ppo"], "--methods"),
+])
+def test_bad_values_name_the_flag(argv, field, capsys):
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(argv)
+  assert field in capsys.readouterr().err
+
+
+def test_tuning_reaches_the_lagrangian_methods_only():
+  a = rl_multiseed.parse(["--cost-critic", "--init-log-std=-0.5,-1.5", "--lagrange-init", "2", "--lagrange-lr",
+                          "0.002", "--pid-gains", "0.01,0.002,0.005"])
+  lag, pid = rl_multiseed.method_spec("lagrangian", a), rl_multiseed.method_spec("pid", a)
+  assert (lag["lagrange_init"], lag["lagrange_lr"]) == (2.0, 0.002) and "λ0=2, lr=0.002" in lag["label"]
+  assert (pid["pid_kp"], pid["pid_ki"], pid["pid_kd"]) == (0.01, 0.002, 0.005) and "K=0.01/0.002/0.005" in pid["label"]
+  for spec in (lag, pid, rl_multiseed.method_spec("penalty", a)):
+    assert spec["cost_critic"] and spec["init_log_std"] == (-0.5, -1.5)
+  task = rl_multiseed.method_spec("task_only", a)
+  assert "lagrange_init" not in task and "cost_critic" not in task and task["init_log_std"] == (-0.5, -1.5)
+  assert "init_log_std" not in rl_multiseed.method_spec("paper", a)  # the paper preset keeps its own
+
+
+def test_defaults_keep_the_earlier_methods():
+  a = rl_multiseed.parse([])
+  assert rl_multiseed.method_spec("pid", a) == dict(label="PID-Lagrangian (ĉ=2)", preset="playground", budget=2.0,
+                                                    multiplier="pid")
+  assert rl_multiseed.method_spec("penalty", a) == dict(label="damage penalty (w=2)", preset="playground",
+                                                        damage_weight=2.0)
