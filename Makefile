@@ -10,6 +10,9 @@ export MPLBACKEND ?= Agg
 # Installed here when missing and when we can (root with apt-get, as on CI); otherwise
 # a note says what to install (tests/test_viewer.py then skips its viewer tests, saying why).
 SYSTEM_PACKAGES := libosmesa6 xvfb xdotool
+# The suite is compile-bound and XLA compiles on one thread: two pytest workers (one module per
+# worker, so module-scoped compiled fixtures compile once) take 11 min on 2 cores instead of 17.
+TEST_WORKERS ?= 2
 
 .PHONY: demo test test-slow bench install clean system-deps
 
@@ -34,7 +37,7 @@ demo: install
 	$(VENV)/bin/mjx-damage demo
 
 test: install
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 test-slow: install
 	$(PY) -m pytest -q -m slow
