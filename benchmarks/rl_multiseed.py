@@ -16,13 +16,19 @@ falling from the first measured episode cost to ĉ over ``--budget-anneal-steps`
 ``--cost-critic`` every damage-aware method uses separate reward and cost critics) — all with ``--preset`` (playground: MuJoCo Playground's PandaPickCube
 recipe) — and ``paper`` / ``paper_task_only`` (the paper's PPO settings, w = 2 / 0).
 
-GPU (one H100; one device call per method, each ≤ 10 min: 300 s training incl.
-compile + final evaluation), results in $OUT, then one table::
+GPU (one H100; one device call per method, each ≤ 10 min: ≤ 300 s training incl. compile + final
+evaluation), results in $OUT, then one table. The recipe that learns Place Plate (docs/safe_rl.md:
+the paper's per-dimension initial std, a cost critic, multipliers from λ0 = 2 with slow gains)::
 
-    for m in task_only penalty lagrangian pid lagrangian_curriculum pid_curriculum; do
-      python benchmarks/rl_multiseed.py --methods $m --seeds 0,1,2,3,4 --budget-seconds 300 --tag $m --results-dir $OUT
+    R="--init-log-std=-0.5,-1.5 --cost-critic --lagrange-init 2 --lagrange-lr 0.002 --pid-gains 0.01,0.002,0.005"
+    for m in task_only penalty lagrangian pid; do
+      python benchmarks/rl_multiseed.py --methods $m $R --seeds 0,1,2,3,4 --budget-seconds 300 --tag ${m}_ls --results-dir $OUT
     done
-    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid,lagrangian_curriculum,pid_curriculum}.json --tag h100
+    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid}_ls.json --tag h100_ls
+
+(The committed table, rl_place_plate_combined_h100_ls.md, ran task_only at 270 s and penalty at 245 s,
+each row's command in the file.) Without the recipe flags the methods run with brax's initial std
+and λ0 = 0, lr 0.1, K = 0.1/0.01/0.05: the configuration whose collapse rl_collapse_evidence.md shows.
 
 Other tasks where the unsafe shortcut is tempting (issue 12 item 5; docs/rl_task_design.md), one
 call per method::
