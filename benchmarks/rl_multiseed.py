@@ -92,8 +92,7 @@ def method_spec(name: str, args) -> dict:
   if name in ("lagrangian", "pid", "lagrangian_curriculum", "pid_curriculum"):
     gains = dict(lagrange_init=args.lagrange_init, lagrange_lr=args.lagrange_lr, pid_kp=args.pid_gains[0],
                  pid_ki=args.pid_gains[1], pid_kd=args.pid_gains[2])
-    default = dict(zip(gains, (0.0, 0.1, 0.1, 0.01, 0.05)))  # train/config.py's
-    if gains != default:
+    if gains != multiplier_defaults():
       tune = f"λ0={args.lagrange_init:g}, " + (f"lr={args.lagrange_lr:g}" if spec["multiplier"] == "lagrangian"
                                                else "K=" + "/".join(f"{g:g}" for g in args.pid_gains))
       spec = dict(spec, label=spec["label"].replace(")", f"; {tune})", 1), **gains)
@@ -101,6 +100,13 @@ def method_spec(name: str, args) -> dict:
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
   return spec
+
+
+def multiplier_defaults() -> dict:
+  """PPOConfig's multiplier settings (train/config.py): the flags' defaults, and unlabelled when unchanged."""
+  from train.config import PPOConfig
+  c = PPOConfig()
+  return {k: getattr(c, k) for k in ("lagrange_init", "lagrange_lr", "pid_kp", "pid_ki", "pid_kd")}
 
 
 def _ints(text):
@@ -126,9 +132,12 @@ def parse(argv):
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
-  p.add_argument("--lagrange-init", type=float, default=0.0, help="Lagrangian methods: initial λ")
-  p.add_argument("--lagrange-lr", type=float, default=0.1, help="plain Lagrangian: dual step per health point of error")
-  p.add_argument("--pid-gains", default="0.1,0.01,0.05", metavar="KP,KI,KD", help="PID-Lagrangian gains")
+  mult = multiplier_defaults()
+  p.add_argument("--lagrange-init", type=float, default=mult["lagrange_init"], help="Lagrangian methods: initial λ")
+  p.add_argument("--lagrange-lr", type=float, default=mult["lagrange_lr"],
+                 help="plain Lagrangian: dual step per health point of error")
+  p.add_argument("--pid-gains", default=f"{mult['pid_kp']:g},{mult['pid_ki']:g},{mult['pid_kd']:g}",
+                 metavar="KP,KI,KD", help="PID-Lagrangian gains")
   p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
                  help="non-paper methods: initial policy log-std of the arm and the gripper (last action) "
                       "dimensions, e.g. --init-log-std=-0.5,-1.5 (the paper's); default: brax's init")

@@ -7,7 +7,8 @@ models MuJoCo lacks, and a Brax wrapper. See docs/DAMAGE_MODEL.md for the model.
 Importing the package sets two process-wide JAX options before any backend
 starts (see :mod:`mjx_damage.runtime`): two XLA:CPU flags (the scheduler flag that
 avoids a thread-pool deadlock of batched MJX calls on CPU, and the older fusion
-emitters, without which deep kinematic chains such as the Panda's run 100× slower),
+emitters, without which deep kinematic chains such as the Panda's run 100× slower;
+added only for jaxlib < 0.11, which no longer knows it),
 and JAX's persistent
 compilation cache in the user's cache directory.
 """

@@ -90,9 +90,9 @@ def backends_started() -> bool:
   return bool(xb is not None and getattr(xb, "_backends", None))
 
 
-def xla_flags_with_cpu_fix(flags: str, wanted: tuple[str, ...] = CPU_FLAGS) -> str:
-  """``flags`` with each of ``wanted`` added, unless the user already chose a value for it."""
-  for flag in wanted:
+def xla_flags_with_cpu_fix(flags: str, wanted: tuple[str, ...] | None = None) -> str:
+  """``flags`` with each of ``wanted`` (default :func:`cpu_flags`) added, unless the user already chose a value for it."""
+  for flag in cpu_flags() if wanted is None else wanted:
     if _name(flag) not in flags:
       flags = (flags + " " + flag).strip()
   return flags
@@ -113,8 +113,9 @@ def configure_xla_cpu() -> bool:
   if backends_started():
     warnings.warn(
         "mjx_damage was imported after JAX started its backends, so it could not set "
-        f"XLA_FLAGS='{' '.join(wanted)}'; batched MJX calls on CPU can deadlock without the first, "
-        "and deep kinematic chains (the Panda) run 100× slower without the second. "
+        f"XLA_FLAGS='{' '.join(wanted)}'; batched MJX calls on CPU can deadlock without the scheduler flag"
+        + (", and deep kinematic chains (the Panda) run 100× slower without the fusion-emitter one. "
+           if CPU_FUSION_FLAG in wanted else ". ") +
         "Import mjx_damage first, or export that XLA_FLAGS value before starting Python.",
         RuntimeWarning, stacklevel=3)
     return False
