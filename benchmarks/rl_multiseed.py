@@ -20,14 +20,14 @@ GPU (one H100; one device call per method, each ≤ 10 min: ≤ 300 s training i
 evaluation), results in $OUT, then one table. The recipe that learns Place Plate (docs/safe_rl.md:
 the paper's per-dimension initial std, a cost critic, multipliers from λ0 = 2 with slow gains)::
 
-    R="--init-log-std=-0.5,-1.5 --cost-critic --lagrange-init 2 --lagrange-lr 0.002 --pid-gains 0.01,0.002,0.005"
+    R="--init-log-std=-0.5,-1.5 --cost-critic --lagrange-init 2 --lagrange-lr 0.002 --pid-gains 0.01,0.002,0.005 --budget 1"
     for m in task_only penalty lagrangian pid; do
-      python benchmarks/rl_multiseed.py --methods $m $R --seeds 0,1,2,3,4 --budget-seconds 300 --tag ${m}_ls --results-dir $OUT
+      python benchmarks/rl_multiseed.py --methods $m $R --seeds 0,1,2,3,4 --budget-seconds 300 --tag ${m}_ls_c1 --results-dir $OUT
     done
-    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid}_ls.json --tag h100_ls
+    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid}_ls_c1.json --tag h100_c1
 
-(The committed table, rl_place_plate_combined_h100_ls.md, ran task_only at 270 s and penalty at 245 s,
-each row's command in the file.) Without the recipe flags the methods run with brax's initial std
+(--budget only changes the Lagrangian methods. The committed table, rl_place_plate_combined_h100_c1.md,
+takes task_only (270 s) and penalty (245 s) from earlier calls, each row's command in the file.) Without the recipe flags the methods run with brax's initial std
 and λ0 = 0, lr 0.1, K = 0.1/0.01/0.05: the configuration whose collapse rl_collapse_evidence.md shows.
 
 Other tasks where the unsafe shortcut is tempting (issue 12 item 5; docs/rl_task_design.md), one
@@ -290,6 +290,12 @@ def _rate(x):
   return "—" if x is None else f"{x:,.0f}"
 
 
+def seeds_meeting(row: dict, safe: float = 0.8, completion: float = 0.9) -> int:
+  """Seeds of a results row whose final policy reaches ``safe`` safe completion and ``completion`` completion."""
+  return sum(p["final_eval"]["safe_completion"] >= safe and p["final_eval"]["completion"] >= completion
+             for p in row["per_seed"])
+
+
 def write_results(base: str, payload: dict) -> None:
   io.write_json(base + ".json", payload, indent=1)
   lines = [f"# {payload['task']}: multi-seed safe RL ({payload['device']})", "",
@@ -297,15 +303,17 @@ def write_results(base: str, payload: dict) -> None:
            f"{payload['eval_episodes']} episodes (train.evaluate, key seed {EVAL_SEED}). Cells: mean ± std "
            "(min) over seeds, in % for rates. Safe completion = completed and every tracked entity's final "
            "health > 95. Time to 80 %: first periodic evaluation with ≥ 80 % safe and ≥ 80 % completion, "
-           "s from the start of training (compile incl.); 'n/S' seeds got there.", "",
-           "| method | seeds | completion % | safe completion % | avg env health | episode cost "
+           "s from the start of training (compile incl.); 'n/S' seeds got there. Seeds ≥ 80/90: seeds whose "
+           "final policy has ≥ 80 % safe completion and ≥ 90 % completion.", "",
+           "| method | seeds | completion % | safe completion % | seeds ≥ 80/90 | avg env health | episode cost "
            "| time to 80 % safe (s) | env-steps/s (all seeds) | env-steps per seed |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|"]
   for r in payload["rows"]:
     s, t = r["summary"], r["summary"]["time_to_80_safe_s"]
     t80 = "—" if t["mean"] is None else f"{t['mean']:.0f} ± {t['std']:.0f} ({t['n']}/{len(r['seeds'])})"
     lines.append(f"| {r['label']} | {','.join(map(str, r['seeds']))} | {_pm(s['completion'])} "
-                 f"| {_pm(s['safe_completion'])} | {_pm(s['avg_env_health'], False)} "
+                 f"| {_pm(s['safe_completion'])} | {seeds_meeting(r)}/{len(r['per_seed'])} "
+                 f"| {_pm(s['avg_env_health'], False)} "
                  f"| {_pm(s['episode_cost'], False)} | {t80} | {_rate(r['throughput_all_seeds'])} "
                  f"| {r['env_steps_per_seed']:,} |")
   lines += ["", "## Per seed", "", "| method | seed | completion | safe completion | avg env health | episode cost "
@@ -339,6 +347,13 @@ def combine(args) -> int:
       raise SystemExit(f"--combine: {path} is from another device/task/evaluation size than the first file")
     payload["rows"] += src["rows"]
     payload["sources"].append(os.path.basename(path))
+  # Reruns of one command keep their own rows: number repeated labels so that neither hides the other.
+  labels = [r["label"] for r in payload["rows"]]
+  seen: dict = {}
+  for i, row in enumerate(payload["rows"]):
+    if labels.count(row["label"]) > 1:
+      seen[row["label"]] = seen.get(row["label"], 0) + 1
+      payload["rows"][i] = dict(row, label=f"{row['label']} — run {seen[row['label']]}")
   payload["date"] = time.strftime("%Y-%m-%d %H:%M")
   slug = payload["task"].rsplit(":", 1)[-1].lower()
   base = os.path.join(args.results_dir, f"rl_{slug}_combined_{args.tag}")

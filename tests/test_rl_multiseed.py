@@ -65,3 +65,13 @@ def test_combine_keeps_each_rows_command(two_calls):
   assert "--tag b" in c["rows"][2]["command"] and "--tag a" in c["rows"][0]["command"]
   md = open(os.path.join(two_calls, "rl_pusherenv_combined_toy.md")).read()
   assert "PID-Lagrangian" in md and "paper PPO preset" in md and "± " in md
+
+
+def test_combine_numbers_reruns_of_one_command(two_calls):
+  a = os.path.join(two_calls, "rl_pusherenv_cpu_a.json")
+  assert rl_multiseed.main(["--combine", a, a, "--tag", "rerun", "--results-dir", two_calls]) == 0
+  c = _load(os.path.join(two_calls, "rl_pusherenv_combined_rerun.json"))
+  labels = [r["label"] for r in c["rows"]]
+  assert len(labels) == 4 and len(set(labels)) == 4
+  assert labels[0].endswith(" — run 1") and labels[2].endswith(" — run 2")
+  assert labels[0].removesuffix(" — run 1") == labels[2].removesuffix(" — run 2")
