@@ -254,3 +254,17 @@ print("REPLICAS EQUAL")
 """
   p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(2), capture_output=True, text=True, timeout=900)
   assert p.returncode == 0 and "REPLICAS EQUAL" in p.stdout, p.stderr[-3000:]
+
+
+def test_several_devices_switch_to_gspmd(monkeypatch):
+  # XLA:GPU 0.11.2 crashes compiling the training iteration in its Shardy export pass (train/mesh.py).
+  before = jax.config.jax_use_shardy_partitioner
+  try:
+    jax.config.update("jax_use_shardy_partitioner", True)
+    assert not M.use_gspmd(1) and jax.config.jax_use_shardy_partitioner  # one device: left alone
+    monkeypatch.setenv("MJX_DAMAGE_SHARDY", "1")
+    assert not M.use_gspmd(2) and jax.config.jax_use_shardy_partitioner  # the user's choice wins
+    monkeypatch.delenv("MJX_DAMAGE_SHARDY")
+    assert M.use_gspmd(2) and not jax.config.jax_use_shardy_partitioner
+  finally:
+    jax.config.update("jax_use_shardy_partitioner", before)

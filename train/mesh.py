@@ -28,6 +28,16 @@ plain ``jit`` (GSPMD inserting the all-reduces):
   ``_psum``/``_pmean`` in :mod:`train.iteration`), not inferred by the
   partitioner, so the scaling is predictable.
 
+Partitioner. With more than one device, :func:`make_mesh` switches JAX to
+its GSPMD partitioner (``jax_use_shardy_partitioner=False``) for the rest of
+the process. jaxlib 0.11.2's XLA:GPU segfaults while compiling the training
+iteration on 2 GPUs in its Shardy-to-HLO export pass (``shardy-xla``, the
+last pass dumped before the crash), even for a toy env with no collectives
+at all (a 2-seed run, one seed per GPU); the same runs compile and train with
+GSPMD. The program is all ``shard_map`` (manual), so the partitioner only
+places its inputs and outputs: results do not depend on it. Set
+``MJX_DAMAGE_SHARDY=1`` to keep Shardy (e.g. to check a newer jaxlib).
+
 The price: with more than one env shard a run is not the one-device run
 spread out — advantages are normalised within each shard's part of a
 minibatch and sampling keys are folded with the shard index — so it is a
@@ -40,6 +50,7 @@ whether its devices sit in one process or several.
 from __future__ import annotations
 
 import math
+import os
 from typing import TYPE_CHECKING, Callable, Sequence
 
 import jax
@@ -69,7 +80,17 @@ def check_layout(cfg: PPOConfig, num_devices: int) -> None:
                        f"{name} {v} is not divisible by {shards}")
 
 
+def use_gspmd(num_devices: int) -> bool:
+  """Before a D-device program compiles: GSPMD instead of Shardy when D > 1 (module docstring, Partitioner).
+
+  Returns whether Shardy is off now. Global to the process, as JAX's partitioner choice is."""
+  if num_devices > 1 and os.environ.get("MJX_DAMAGE_SHARDY", "0") != "1":
+    jax.config.update("jax_use_shardy_partitioner", False)
+  return not jax.config.jax_use_shardy_partitioner
+
+
 def make_mesh(devices: Sequence, num_seeds: int) -> Mesh:
+  use_gspmd(len(devices))
   seeds, envs = shape(len(devices), num_seeds)
   return Mesh(np.asarray(devices, dtype=object).reshape(seeds, envs), (SEEDS, ENVS))
 
