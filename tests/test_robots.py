@@ -155,7 +155,7 @@ def test_random_actions_respect_joint_limits_batched():
   _check_random_actions(8, 500, 4)
 
 
-@pytest.mark.parametrize("name", ["place_plate", "pour_water"])
+@pytest.mark.parametrize("name", ["place_plate", "pour_water", "shelve_item"])
 def test_gripper_scenes_unchanged_by_per_robot_edits(name):
   """Tasks that adapt their scene per robot (Task.edit_scene, via MjSpec) compile the gripper's scene exactly
   as the plain XML does."""
@@ -183,5 +183,19 @@ def test_panda_task_adaptations():
   weld = m.equality("hold").id
   assert m.eq_obj2id[weld] == m.body("panda_hand").id
   np.testing.assert_allclose(m.eq_data[weld, 3:10], [0, 0, P.GRIP_OFFSET, 0, 1, 0, 0])
-  with pytest.raises(ValueError, match="robot: pour_water has no tilt channel for 'panda_wrist'"):
+  with pytest.raises(ValueError, match="robot: task 'pour_water' supports gripper, panda only, got 'panda_wrist'"):
     tasks.make("pour_water", robot="panda_wrist")
+  s = tasks.make("shelve_item", robot="panda").unwrapped
+  np.testing.assert_allclose(s.mj_model.geom_size[s.mj_model.geom("cereal_box").id], [0.03, 0.03, 0.08])
+  # gripped high enough that the palm clears the box top: grip point + finger length = top + 5 mm
+  assert s.grip_dz + P.FINGER_LENGTH == pytest.approx(0.08 + 0.005)
+  assert s.grip_closed < tasks.make("shelve_item").unwrapped.grip_closed  # a narrower box, the same squeeze
+  np.testing.assert_allclose(s.mj_model.body_pos[s.mj_model.body("panda_link0").id][:2], [-0.35, 0.0])  # mount
+
+
+@pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast"])
+def test_gripper_only_tasks_refuse_other_robots_before_compiling(name):
+  # their holder is welded to the floating hand; the refusal names the field and the robots they take
+  assert tasks.describe(name)["robots"] == ["gripper"]
+  with pytest.raises(ValueError, match=f"robot: task '{name}' supports gripper only, got 'panda'"):
+    tasks.make(name, robot="panda")
