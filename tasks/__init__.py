@@ -132,6 +132,9 @@ def make(name: str, **overrides):
       raise ValueError(f"{k}: unknown override for task {name!r}; valid: {', '.join(sorted(valid))}")
   robot = overrides.get("robot", robots.DEFAULT)
   robots.robot_class(robot)  # unknown names raise here, before anything compiles
+  supported = robots_for(name)
+  if robot not in supported:
+    raise ValueError(f"robot: task {name!r} supports {', '.join(supported)} only, got {robot!r}")
   wrapper_kw = {_WRAPPER_OPTIONS[k][0]: overrides.get(k, v) for k, (_, v) in _WRAPPER_OPTIONS.items()}
   task_kw = {k: v for k, v in overrides.items() if k not in _WRAPPER_OPTIONS and k != "robot"}
   # the robot is chosen per instance before the task's constructor runs (constructors take no robot)
@@ -139,6 +142,12 @@ def make(name: str, **overrides):
   env.robot_name = robot
   env.__init__(**task_kw)
   return DamageWrapper(env, **wrapper_kw)
+
+
+def robots_for(name: str) -> list[str]:
+  """The robots ``make(name, robot=...)`` accepts (the task's ``supported_robots``, else every robot)."""
+  only = task_class(name).supported_robots
+  return [r for r in robots.names() if only is None or r in only]
 
 
 DESCRIPTION_FIELDS = ("name", "summary", "damage_modality", "tracked_entities", "unsafe_shortcut", "safe_strategy",
@@ -166,7 +175,7 @@ def describe(name: str) -> dict:
       "safe_strategy": cls.safe_strategy,
       "horizon": int(cls.default_episode_length),
       "robot": robots.DEFAULT,
-      "robots": robots.names(),
+      "robots": robots_for(name),
       "success_condition": cls.success_condition,
   }
 

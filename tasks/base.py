@@ -82,6 +82,7 @@ class Task(DamageEnv):
   obs_modes: ClassVar[tuple[str, ...]] = ("full",)
   robot_name: ClassVar[str] = robots.DEFAULT
   robot_mounts: ClassVar[dict] = {}
+  supported_robots: ClassVar[tuple[str, ...] | None] = None  # robots the task supports; None: every robot
   # What users read in tasks.describe(name) / `mjx-damage tasks` (one line each).
   damage_modality: ClassVar[str] = ""  # which DEM the unsafe shortcut triggers, and how
   unsafe_shortcut: ClassVar[str] = ""
