@@ -193,9 +193,9 @@ def test_panda_task_adaptations():
   np.testing.assert_allclose(s.mj_model.body_pos[s.mj_model.body("panda_link0").id][:2], [-0.35, 0.0])  # mount
 
 
-@pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast"])
+@pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
 def test_gripper_only_tasks_refuse_other_robots_before_compiling(name):
-  # their holder is welded to the floating hand; the refusal names the field and the robots they take
+  # a holder welded to the floating hand, or a mobile base; the refusal names the field and the robots
   assert tasks.describe(name)["robots"] == ["gripper"]
   with pytest.raises(ValueError, match=f"robot: task '{name}' supports gripper only, got 'panda'"):
     tasks.make(name, robot="panda")
