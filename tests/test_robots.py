@@ -191,6 +191,10 @@ def test_panda_task_adaptations():
   assert s.grip_dz + P.FINGER_LENGTH == pytest.approx(0.08 + 0.005)
   assert s.grip_closed < tasks.make("shelve_item").unwrapped.grip_closed  # a narrower box, the same squeeze
   np.testing.assert_allclose(s.mj_model.body_pos[s.mj_model.body("panda_link0").id][:2], [-0.35, 0.0])  # mount
+  f = tasks.make("add_firewood", robot="panda").unwrapped.mj_model  # beside the counter, facing it
+  np.testing.assert_allclose(f.body_pos[f.body("panda_link0").id][:2], [-0.05, -0.45])
+  np.testing.assert_allclose(f.body_quat[f.body("panda_link0").id], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)],
+                             atol=1e-6)
 
 
 @pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
