@@ -117,7 +117,10 @@ def test_mechanical_properties(forces, acc, alpha, beta, E, scale, k):
   # scaling every force magnitude up never lowers damage
   fp2, fq2 = load(F * k, links, [acc], 1)
   d2 = np.asarray(md.mechanical_damage(fp2, fq2, alpha, beta, E, scale))
-  assert d2[0] >= d[0] * (1 - 1e-5) - 1e-3
+  # f32 rounding: a force along the acceleration keeps a perpendicular part of ~eps·|F| (scaled by k, by
+  # different roundings), which Λ·β amplifies: allow that much, relative to the largest force
+  noise = scale * (alpha + beta) * k * float(np.abs(F).max()) * 4e-7
+  assert d2[0] >= d[0] * (1 - 1e-5) - 1e-3 - noise
 
 
 @settings(max_examples=60, deadline=None)
