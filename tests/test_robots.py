@@ -195,6 +195,11 @@ def test_panda_task_adaptations():
   np.testing.assert_allclose(f.body_pos[f.body("panda_link0").id][:2], [-0.05, -0.45])
   np.testing.assert_allclose(f.body_quat[f.body("panda_link0").id], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)],
                              atol=1e-6)
+  from tasks import ignite_wood as IW
+  assert tasks.make("ignite_wood").unwrapped.grasp_z == IW.GRASP_Z  # the gripper's palm 2 mm over the lighter
+  w = tasks.make("ignite_wood", robot="panda").unwrapped  # shorter fingers grasp higher by the difference
+  assert w.grasp_z + P.FINGER_LENGTH == pytest.approx(IW.GRASP_Z + 0.07)
+  np.testing.assert_allclose(w.mj_model.body_pos[w.mj_model.body("panda_link0").id][:2], [-0.05, -0.45])
 
 
 @pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
