@@ -47,6 +47,7 @@ CPU plumbing check (learns nothing)::
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import math
 import os
@@ -348,11 +349,10 @@ def combine(args) -> int:
     payload["rows"] += src["rows"]
     payload["sources"].append(os.path.basename(path))
   # Reruns of one command keep their own rows: number repeated labels so that neither hides the other.
-  labels = [r["label"] for r in payload["rows"]]
-  seen: dict = {}
+  total, seen = collections.Counter(r["label"] for r in payload["rows"]), collections.Counter()
   for i, row in enumerate(payload["rows"]):
-    if labels.count(row["label"]) > 1:
-      seen[row["label"]] = seen.get(row["label"], 0) + 1
+    if total[row["label"]] > 1:
+      seen[row["label"]] += 1
       payload["rows"][i] = dict(row, label=f"{row['label']} — run {seen[row['label']]}")
   payload["date"] = time.strftime("%Y-%m-%d %H:%M")
   slug = payload["task"].rsplit(":", 1)[-1].lower()

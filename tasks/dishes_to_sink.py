@@ -75,11 +75,6 @@ CARRY_Z = 0.10  # m, grip-point height of the carry (both policies)
 OPEN_GAP = 0.13  # m, the gripper has let go (plate width + 1 cm)
 
 
-def grip_closed(half):
-  """Gripper command closing on a dish of half width ``half`` (m): target 3 cm inside each side, 12 N."""
-  return float(R.gripper_command_for_gap(2 * half - 0.06))
-
-
 class DishesToSink(Task):
   name = "dishes_to_sink"
   xml = "dishes_to_sink.xml"
@@ -163,7 +158,7 @@ class DishesToSink(Task):
     half = jnp.array([PLATE_HALF, CUP_HALF])
     half_h = jnp.array([PLATE_HALF_H, CUP_HALF_H])
     grip_dz = jnp.array([PLATE_GRIP, CUP_GRIP]) - half_h  # grip point relative to the dish centre
-    closed = jnp.array([grip_closed(PLATE_HALF), grip_closed(CUP_HALF)])
+    closed = jnp.array([R.squeeze_command(PLATE_HALF), R.squeeze_command(CUP_HALF)])
     opened = 1.0
     goals = self.goals()
     clear_z = HOVER_Z if safe else CARRY_Z + 0.04  # m, the hand rises to this over the basin after a release

@@ -136,7 +136,7 @@ class PickUpScrub(Task):
     safe = style == "safe"
     robot = self.robot
     preshape = R.gripper_command_for_gap(PRESHAPE_GAP)
-    close = R.gripper_command_for_gap(2 * HANDLE_HALF - 0.06)  # 3 cm inside each side: ≈ 12 N per pad
+    close = R.squeeze_command(HANDLE_HALF)  # 3 cm inside each side: ≈ 12 N per pad
     gz = self.grasp_z
 
     def act(state, rng):

@@ -84,9 +84,7 @@ LINE_UP_X = DOOR_X - DISH_HALF[0] - 0.02  # m, dish centre x lined up with its f
 INSERT_SPEED = 0.25  # m/s, the safe insertion (accelerating and braking at INSERT_ACCEL)
 INSERT_ACCEL = 1.0  # m/s²
 HOVER_Z = 0.10  # m, grip-point height when moving the open hand over the counter
-# 3 cm inside each side: 12 N per finger, below the servos' 16 N limit (two saturated fingers would leave the
-# dish free to drift across the grip)
-GRIP_CLOSED = float(R.gripper_command_for_gap(2 * DISH_HALF[1] - 0.06))
+GRIP_CLOSED = R.squeeze_command(DISH_HALF[1])  # 3 cm inside each side
 
 
 class PlaceInMicrowave(Task):

@@ -80,11 +80,6 @@ IN_HAND_XY = 0.05  # m, largest xy offset of the in-hand start from the goal (pe
 IN_HAND_SPEED = 0.4  # m/s, default hand speed limit with the plate in hand (the robot alone: ≈ 0.83 m/s)
 GRASP_Z = 0.004  # m, grip-point (fingertip) height when grasping: 4 mm above the counter
 
-def grip_closed(half_y):
-  """Gripper command closing on a plate of half width ``half_y`` (m): target 3 cm inside each side, 12 N."""
-  return float(R.gripper_command_for_gap(2 * half_y - 0.06))
-
-
 class PlacePlate(Task):
   name = "place_plate"
   xml = "place_plate.xml"
@@ -124,7 +119,7 @@ class PlacePlate(Task):
 
   def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
     self.plate_half_y = PLATE_HALF_Y.get(robot_cls.name, NARROW_PLATE_HALF_Y)
-    self.grip_closed = grip_closed(self.plate_half_y)
+    self.grip_closed = R.squeeze_command(self.plate_half_y)
     if self.plate_half_y != PLATE_HALF:
       for name in ("plate", "goal"):
         g = spec.geom(name)

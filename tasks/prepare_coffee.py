@@ -112,7 +112,7 @@ class PrepareCoffee(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    closed = R.gripper_command_for_gap(2 * MUG_HALF[1] - 0.06)  # 3 cm inside each side: ≈ 12 N per pad
+    closed = R.squeeze_command(MUG_HALF[1])  # 3 cm inside each side: ≈ 12 N per pad
     wide = R.gripper_command_for_gap(0.11)
     release = R.gripper_command_for_gap(RELEASE_GAP)
     spot = jnp.array(SPOT)

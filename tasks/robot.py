@@ -32,7 +32,7 @@ AGENT_ENTITY = _gripper.Gripper.agent_entity()
 STATIC, ROBOT, OBJECT = 1, 2, 4
 
 __all__ = ["FINGER_HALF_THICK", "GAP_MAX", "GAP_MIN", "MAX_STEP", "Q_MIN", "Q_MAX", "action", "gap",
-           "gripper_command_for_gap", "move_toward"]
+           "gripper_command_for_gap", "move_toward", "squeeze_command"]
 
 
 def gap(q_half):
@@ -44,6 +44,13 @@ def gripper_command_for_gap(g):
   """Gripper action in [−1, 1] whose target inner gap is ``g`` m (clipped to the command range)."""
   q = g / 2.0 + FINGER_HALF_THICK
   return jnp.clip(2.0 * (q - Q_MIN) / (Q_MAX - Q_MIN) - 1.0, -1.0, 1.0)
+
+
+def squeeze_command(half_width, inside=0.03):
+  """Gripper command closing on an object of half width ``half_width`` (m): target ``inside`` m inside
+  each side. The default 3 cm squeezes ≈ 12 N per finger, below the servos' 16 N cap, so the finger
+  springs keep the object centred (with both fingers saturated it would drift across the grip)."""
+  return float(gripper_command_for_gap(2 * half_width - 2 * inside))
 
 
 # -- helpers for scripted policies ------------------------------------------------

@@ -98,13 +98,6 @@ NARROW_BOX_HALF_Y = 0.03  # m
 PALM_CLEARANCE = 0.005  # m, palm underside above the box top when the grip point is raised for short fingers
 
 
-def grip_closed(half_y):
-  """Gripper command closing on a box of half width ``half_y`` (m): target 3 cm inside each side, 12 N
-  per finger, below the servo's 16 N cap so the spring keeps the box centred between the fingers (with
-  both fingers saturated it would drift sideways)."""
-  return float(R.gripper_command_for_gap(2 * half_y - 0.06))
-
-
 NEIGHBOURS = ("wineglass", "bottle_of_wine", "bottle_of_beer")
 # (dx from the slot, dy from the slot, absolute centre z) of each neighbour, all on the shelf: the bottles
 # beside the slot, the glass at the shelf's front edge in line with the slot.
@@ -151,7 +144,7 @@ class ShelveItem(Task):
 
   def edit_scene(self, spec, robot_cls) -> None:
     self.box_half_y = BOX_HALF_Y.get(robot_cls.name, NARROW_BOX_HALF_Y)
-    self.grip_closed = grip_closed(self.box_half_y)
+    self.grip_closed = R.squeeze_command(self.box_half_y)  # 3 cm inside each side
     # grip point above the box centre: GRIP_DZ, or higher where the fingers are too short for the palm
     # to clear the box top from there (the Panda's 5.5 cm; the gripper's 7 cm clear it)
     short = robot_cls.finger_length < BOX_HALF[2] - GRIP_DZ

@@ -20,6 +20,7 @@ import pytest
 from mujoco import mjx
 
 import tasks
+from tasks import ignite_wood as IW
 from tasks import robot as R
 from tasks.robots import checks
 from tasks.robots import panda as P
@@ -195,7 +196,6 @@ def test_panda_task_adaptations():
   np.testing.assert_allclose(f.body_pos[f.body("panda_link0").id][:2], [-0.05, -0.45])
   np.testing.assert_allclose(f.body_quat[f.body("panda_link0").id], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)],
                              atol=1e-6)
-  from tasks import ignite_wood as IW
   assert tasks.make("ignite_wood").unwrapped.grasp_z == IW.GRASP_Z  # the gripper's palm 2 mm over the lighter
   w = tasks.make("ignite_wood", robot="panda").unwrapped  # shorter fingers grasp higher by the difference
   assert w.grasp_z + P.FINGER_LENGTH == pytest.approx(IW.GRASP_Z + 0.07)

@@ -57,6 +57,9 @@ Q_READY = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi 
 R_DOWN = np.diag([1.0, -1.0, -1.0])  # hand z down, hand y (finger axis) along world y
 
 DEFAULT_MOUNT = (-0.5, 0.0, 0.0, 0.0)  # base x, y, z (m), yaw (rad): 0.5 m behind the task origin
+# Beside the work area, facing it (yaw 90°), for tasks whose objects lie near x ≈ −0.25 m at counter height:
+# 0.25–0.3 m in front of DEFAULT_MOUNT, too close for the hand to reach down to (it stalls folded).
+SIDE_MOUNT = (-0.05, -0.45, 0.0, 1.5707963)
 REACH_BOX = ((0.22, -0.55, -0.05), (0.80, 0.55, 0.70))  # m, base frame: grip-point targets accepted
 LIMIT_MARGIN = 0.02  # rad, joint targets stay this far inside the range (servo overshoot room)
 DAMPING = 0.05  # DLS damping λ (m): keeps Δq bounded near singularities (stretched arm)
