@@ -23,7 +23,9 @@ traced argument: new weights (training's periodic evaluation) reuse it too.
 Episodes are sharded over all devices (1-D mesh,
 :class:`jax.sharding.NamedSharding`): the local ones, or with several
 processes (:mod:`train.distributed`) every process's, each process passing
-the same keys.
+the same keys. Each device rolls out its share with the one-device program
+under ``shard_map`` (no cross-device traffic until the summaries are
+gathered), which is what makes the sweep scale with the devices.
 
 This module is the one place evaluation episodes are rolled out and
 summarised: the ``mjx-damage eval`` CLI (:mod:`apps.eval_cli`), :mod:`train.sweep`,
@@ -46,6 +48,7 @@ from mjx_damage import program_cache
 from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.randomize import check_fragility
 from train import memory as MEM
+from train import mesh as MESH
 
 Policy = Callable  # policy(state, rng) -> action f32[action_size], one env, jittable
 
@@ -176,6 +179,7 @@ class Evaluator:
     else:
       self.params = policy.params
     self.devices = list(devices) if devices is not None else jax.devices()
+    MESH.use_gspmd(len(self.devices))  # jaxlib 0.11.2's Shardy export segfaults on multi-GPU shard_map
     self.mesh = Mesh(np.array(self.devices), ("episodes",))
     self.sharding = NamedSharding(self.mesh, PartitionSpec("episodes"))
     self.replicated = NamedSharding(self.mesh, PartitionSpec())
@@ -183,7 +187,13 @@ class Evaluator:
     def one(params, key, fragility):
       return run_episode(env, lambda state, rng: apply(params, state, rng), episode_length, key, fragility)
 
-    batched = jax.vmap(one, in_axes=(None, 0, 0))
+    # shard_map, not GSPMD over a sharded batch: MJX's solver loops stop on a test reduced over the
+    # whole batch, which GSPMD turns into a cross-device all-reduce per solver iteration of every
+    # substep; here each device runs the one-device program on its own episodes (as train.mesh).
+    # check_vma=False: MJX's lax.cond over batch-varying values fails shard_map's type check.
+    batched = jax.shard_map(jax.vmap(one, in_axes=(None, 0, 0)), mesh=self.mesh,
+                            in_specs=(PartitionSpec(), PartitionSpec("episodes"), PartitionSpec("episodes")),
+                            out_specs=PartitionSpec("episodes"), check_vma=False)
     # Replicated out: every process (several hosts: train.distributed) reads all episodes' summaries.
     self._fn = jax.jit(batched, in_shardings=(self.replicated, self.sharding, self.sharding),
                        out_shardings=self.replicated)

@@ -28,7 +28,8 @@ plain ``jit`` (GSPMD inserting the all-reduces):
   ``_psum``/``_pmean`` in :mod:`train.iteration`), not inferred by the
   partitioner, so the scaling is predictable.
 
-Partitioner. With more than one device, :func:`make_mesh` switches JAX to
+Partitioner. With more than one device, :func:`make_mesh` (and
+:class:`train.evaluate.Evaluator`, also ``shard_map``) switches JAX to
 its GSPMD partitioner (``jax_use_shardy_partitioner=False``) for the rest of
 the process. jaxlib 0.11.2's XLA:GPU segfaults while compiling the training
 iteration on 2 GPUs in its Shardy-to-HLO export pass (``shardy-xla``, the
