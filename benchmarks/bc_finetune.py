@@ -17,7 +17,7 @@ seed and mean ± std, in ``benchmarks/results/bc_finetune_<task>_<device>[_<tag>
 
 GPU (one call, ≤ 10 min; move_glass_of_water once it is registered, else pour_water)::
 
-    python benchmarks/bc_finetune.py --task pour_water --results-dir $OUT
+    python benchmarks/bc_finetune.py --results-dir $OUT --budget-seconds 360
 
 CPU (tiny: checks the pipeline end to end; its numbers are not the experiment)::
 
@@ -83,6 +83,9 @@ def main(argv=None) -> int:
   ap.add_argument("--preset", default="playground")
   ap.add_argument("--tag", default="")
   ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  ap.add_argument("--budget-seconds", type=float, default=None,
+                  help="stop fine-tuning after the iteration that crosses this many seconds of it (then evaluate "
+                       "and write): keeps one GPU call under its time limit")
   for k, v in FULL.items():
     ap.add_argument(f"--{k.replace('_', '-')}", type=type(v), default=None, help=f"default {v} (--quick: {QUICK[k]})")
   args = ap.parse_args(argv)
@@ -90,6 +93,11 @@ def main(argv=None) -> int:
   size.update({k: getattr(args, k) for k in FULL if getattr(args, k) is not None})
   if args.task not in tasks.names():
     ap.error(f"--task: unknown task {args.task!r}")
+  for k, v in size.items():
+    if not (v >= 0 if k in ("warmup", "damage_weight") else v > 0):  # also refuses NaN
+      ap.error(f"--{k.replace('_', '-')}: must be {'>= 0' if k in ('warmup', 'damage_weight') else '> 0'}, got {v}")
+  if args.budget_seconds is not None and not args.budget_seconds > 0:
+    ap.error(f"--budget-seconds: must be > 0, got {args.budget_seconds}")
   seeds = tuple(range(size["seeds"]))
   slug, desc = device_info()
   t_start = time.perf_counter()
@@ -124,6 +132,7 @@ def main(argv=None) -> int:
                       critic_warmup_iterations=size["warmup"], damage_weight=size["damage_weight"],
                       num_envs=size["num_envs"], num_timesteps=size["timesteps"],
                       num_eval_envs=size["eval_episodes"], progress=False, plot=False,
+                      time_limit=args.budget_seconds,
                       **({"batch_size": size["num_envs"] // 4, "num_minibatches": 4} if args.quick else {}))
     ft_s = time.perf_counter() - t0
     after = res.final_evals
@@ -132,7 +141,8 @@ def main(argv=None) -> int:
   summary = {k: {"before": stats(before, k), "after": stats(after, k)} for k in ("completion", "safe_completion")}
   result = {"command": cmd.strip(), "device": desc, "task": args.task, "preset": args.preset, "size": size,
             "quick": args.quick, "seeds": list(seeds), "dataset_episodes": kept, "bc_seconds": bc_s,
-            "finetune_seconds": ft_s, "wall_seconds": time.perf_counter() - t_start,
+            "finetune_seconds": ft_s, "budget_seconds": args.budget_seconds, "stopped_early": res.stopped_early,
+            "wall_seconds": time.perf_counter() - t_start,
             "env_steps_per_seed": res.env_steps, "before": before, "after": after, "summary": summary}
   os.makedirs(args.results_dir, exist_ok=True)
   base = os.path.join(args.results_dir, f"bc_finetune_{args.task}_{slug}" + (f"_{args.tag}" if args.tag else ""))
@@ -143,7 +153,8 @@ def main(argv=None) -> int:
            f"(of {size['demos']} each). BC into the PPO actor ({size['bc_steps']} steps), then PPO from it with "
            f"damage weight {size['damage_weight']:g}, {size['warmup']} critic warm-up iterations, "
            f"{size['num_envs']} envs × {res.env_steps:,} env steps per seed ({ft_s:.0f} s for all "
-           f"{len(seeds)} seeds in one program). Evaluation: {size['eval_episodes']} deterministic episodes per seed.",
+           f"{len(seeds)} seeds in one program{'; stopped at the wall-clock budget' if res.stopped_early else ''}). "
+           f"Evaluation: {size['eval_episodes']} deterministic episodes per seed.",
            "" if not args.quick else "\n**--quick: a pipeline check at toy size; these numbers are not the experiment.**",
            "", "| | completion % | safe completion % |", "|---|---|---|"]
   for when in ("before", "after"):

@@ -144,3 +144,20 @@ def test_bc_cli_writes_a_checkpoint_and_refuses_to_overwrite(demos, tmp_path):
   p = subprocess.run(cmd[:4] + ["--dataset", str(tmp_path / "missing.hdf5")], cwd=tmp_path, env=env,
                      capture_output=True, text=True, timeout=600)
   assert p.returncode == 2 and "--dataset" in p.stderr
+
+
+@pytest.mark.parametrize("flags, named", [
+    (["--demos", "0"], "--demos"), (["--bc-steps", "-5"], "--bc-steps"),
+    (["--damage-weight", "nan"], "--damage-weight"), (["--budget-seconds", "0"], "--budget-seconds"),
+    (["--task", "no_such_task"], "--task")])
+def test_bc_finetune_bad_flags_exit_2_naming_the_flag(flags, named, capsys):
+  """benchmarks/bc_finetune.py refuses bad sizes and budgets before recording or compiling anything."""
+  import importlib.util
+  spec = importlib.util.spec_from_file_location(
+      "bc_finetune", os.path.join(os.path.dirname(os.path.dirname(__file__)), "benchmarks", "bc_finetune.py"))
+  mod = importlib.util.module_from_spec(spec)
+  spec.loader.exec_module(mod)
+  with pytest.raises(SystemExit) as e:
+    mod.main(flags)
+  assert e.value.code == 2
+  assert named in capsys.readouterr().err
