@@ -200,6 +200,10 @@ def test_panda_task_adaptations():
   w = tasks.make("ignite_wood", robot="panda").unwrapped  # shorter fingers grasp higher by the difference
   assert w.grasp_z + P.FINGER_LENGTH == pytest.approx(IW.GRASP_Z + 0.07)
   np.testing.assert_allclose(w.mj_model.body_pos[w.mj_model.body("panda_link0").id][:2], [-0.05, -0.45])
+  # the hard scrub presses half steps with the arm (a full step pried the sponge out), full ones with the gripper
+  wc = tasks.task_class("wipe_counter")
+  assert wc.unsafe_presses.get(tasks.make("wipe_counter", robot="panda").unwrapped.robot_name) == -0.5
+  assert wc.unsafe_presses.get(tasks.make("wipe_counter").unwrapped.robot_name) == -1.0
 
 
 @pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
