@@ -65,6 +65,21 @@ class OpenSingleDoor(Task):
   unsafe_shortcut = "yank the handle at full speed past the hinge's 95° stop"
   safe_strategy = "pull along the door's arc at moderate speed, decelerating to 75°"
   success_condition = "door angle ≥ 60°"
+  grip_dz = GRIP_DZ  # per robot: edit_scene
+  # Per robot, the pull's grip test (gap below the bar's width + margin, m) and the safe pull's lead
+  # (rad the commanded grasp point runs ahead of the door). The Panda's fingers close at the real hand's
+  # pace: pulling once the pads touched (+6 mm) let the bar slip out and the hand stalled beside it
+  # (trace: gap 6 cm while the door swung), so it waits for the pinch (+1 mm). Its arm also pulls
+  # harder than the gripper's slides: with the 0.25 rad lead 1 of 8 safe pulls carried the door into
+  # its stop, with 0.12 none (benchmarks/scripted_trace.py open_single_door --robot panda).
+  hold_margins = {"gripper": 0.006, "panda": 0.001}
+  safe_leads = {"gripper": 0.25, "panda": 0.12}
+
+  def edit_scene(self, spec, robot_cls) -> None:
+    # GRIP_DZ clears the bar's top by 5 mm under the gripper's palm (7 cm fingers); the Panda's palm sits
+    # 5.5 cm above its fingertips, so it grasps higher by the difference, or its palm would ram the bar
+    # (both healths hit 0 on first touch: benchmarks/scripted_trace.py open_single_door --robot panda)
+    self.grip_dz = GRIP_DZ - (robot_cls.finger_length - R.FINGER_LENGTH)
 
   def setup(self, m):
     j = m.joint("door").id
@@ -81,7 +96,7 @@ class OpenSingleDoor(Task):
     return jnp.stack([HINGE_XY[0] + c * px - s * py, HINGE_XY[1] + s * px + c * py, HANDLE_Z + 0.0 * theta])
 
   def grasp_point(self, theta):
-    return self.handle_pos(theta) + jnp.array([0.0, 0.0, GRIP_DZ])
+    return self.handle_pos(theta) + jnp.array([0.0, 0.0, self.grip_dz])
 
   def sample_init(self, rng, qpos):
     k = jax.random.split(rng, 2)
@@ -105,7 +120,7 @@ class OpenSingleDoor(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    lead = 0.25 if safe else 0.6  # rad the commanded grasp point runs ahead of the door
+    lead = self.safe_leads.get(self.robot_name, 0.25) if safe else 0.6  # rad the grasp point runs ahead
     speed = 0.4 if safe else 1.0
 
     def act(state, rng):
@@ -113,7 +128,7 @@ class OpenSingleDoor(Task):
       e, g, th = robot.eef_pos(d), robot.gap(d), self.angle(d)
       grasp = self.grasp_point(th)
       err = jnp.linalg.norm(e - grasp)
-      held = (g < 2 * HANDLE_R + 0.006) & (err < 0.02)
+      held = (g < 2 * HANDLE_R + self.hold_margins.get(self.robot_name, 0.006)) & (err < 0.02)
       # approach along the outward normal n: line up 8 cm out, then move in and close
       n = jnp.stack([-jnp.cos(th), -jnp.sin(th), 0.0 * th])
       rel = e - grasp

@@ -21,6 +21,7 @@ from mujoco import mjx
 
 import tasks
 from tasks import ignite_wood as IW
+from tasks import open_single_door as OD
 from tasks import robot as R
 from tasks.robots import checks
 from tasks.robots import panda as P
@@ -204,6 +205,10 @@ def test_panda_task_adaptations():
   wc = tasks.task_class("wipe_counter")
   assert wc.unsafe_presses.get(tasks.make("wipe_counter", robot="panda").unwrapped.robot_name) == -0.5
   assert wc.unsafe_presses.get(tasks.make("wipe_counter").unwrapped.robot_name) == -1.0
+  # open_single_door: the palm clears the handle, so shorter fingers grasp higher
+  assert tasks.make("open_single_door").unwrapped.grip_dz == OD.GRIP_DZ
+  assert tasks.make("open_single_door", robot="panda").unwrapped.grip_dz + P.FINGER_LENGTH == pytest.approx(
+      OD.GRIP_DZ + 0.07)
 
 
 @pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
