@@ -2,11 +2,21 @@
 
 One command:
 
-1. record ``--demos`` safe and ``--demos`` unsafe episodes of the task's scripted
-   policies through the compiled batched step (:func:`train.record.record`),
-   keeping the successful ones (a mixed-quality dataset, like the paper's 25 + 25);
-2. behaviour-clone them into the PPO actor, one network per seed in one call
-   (:func:`train.bc_actor.fit_actor`);
+1. record ``--record`` episodes each of the careful and the careless operator
+   (:mod:`tasks.operators`: noisy, closed-loop variants of the task's safe and
+   unsafe scripts) through the compiled batched step (:func:`train.record.record`),
+   keeping up to ``--demos`` successful ones of each (a mixed-quality dataset, like
+   the paper's 25 + 25 human demonstrations; ``--demos-from scripted`` takes the
+   deterministic scripts instead);
+2. behaviour-clone them into the PPO actor (``--policy-hidden``, default 512×3),
+   one network per seed in one call (:func:`train.bc_actor.fit_actor`);
+
+   Why operators and a wide actor (CPU check, 32 episodes, pick_egg): BC of
+   the deterministic scripts into the preset's 32×4 actor completed 0 %; of 64
+   careful-operator episodes, 6 % with 32×4, 34 % with 256×3, 94 % (81 % safe)
+   with 512×3. On move_glass_of_water the deterministic scripts' BC stays at
+   0 % even at 512×3 (no recovery states), while 2 successful careful episodes
+   gave 44 % (34 % safe);
 3. evaluate each seed's BC actor (``--eval-episodes`` deterministic episodes);
 4. fine-tune every seed with PPO and the damage penalty from its BC actor
    (``train(init_from=..., critic_warmup_iterations=..., damage_weight=...)``, all
@@ -15,7 +25,7 @@ One command:
 Reports completion and safe completion (DAMAGE_MODEL.md §7) before and after, per
 seed and mean ± std, in ``benchmarks/results/bc_finetune_<task>_<device>[_<tag>].{json,md}``.
 
-GPU (one call, ≤ 10 min; move_glass_of_water once it is registered, else pour_water)::
+GPU (one call, ≤ 10 min)::
 
     python benchmarks/bc_finetune.py --results-dir $OUT --budget-seconds 360
 
@@ -51,11 +61,13 @@ from train import curate  # noqa: E402
 from train import evaluate as E  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.record import record  # noqa: E402
+from tasks import operators  # noqa: E402
 
-FULL = dict(demos=25, seeds=3, bc_steps=4000, eval_episodes=256, num_envs=2048, timesteps=20_000_000,
+FULL = dict(demos=25, record=256, seeds=3, bc_steps=8000, eval_episodes=256, num_envs=2048, timesteps=20_000_000,
             warmup=10, damage_weight=2.0, chunk=64)
-QUICK = dict(demos=24, seeds=2, bc_steps=2000, eval_episodes=32, num_envs=32, timesteps=32 * 10 * 6,
+QUICK = dict(demos=24, record=24, seeds=2, bc_steps=2000, eval_episodes=32, num_envs=32, timesteps=32 * 10 * 6,
              warmup=2, damage_weight=2.0, chunk=12)
+SOURCES = {"operators": ("careful", "careless"), "scripted": ("safe", "unsafe")}
 
 
 def eval_checkpoint(run_dir: str, env, seeds, episodes: int) -> list[dict]:
@@ -83,6 +95,11 @@ def main(argv=None) -> int:
   ap.add_argument("--preset", default="playground")
   ap.add_argument("--tag", default="")
   ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  ap.add_argument("--demos-from", choices=tuple(SOURCES), default="operators",
+                  help="operators: the noisy careful/careless operators (tasks.operators), --record episodes each; "
+                       "scripted: the deterministic safe/unsafe scripts, --demos episodes each")
+  ap.add_argument("--policy-hidden", default="512,512,512",
+                  help="actor hidden sizes of BC and fine-tuning (the preset's 32×4 cannot hold the demonstrator)")
   ap.add_argument("--budget-seconds", type=float, default=None,
                   help="stop fine-tuning after the iteration that crosses this many seconds of it (then evaluate "
                        "and write): keeps one GPU call under its time limit")
@@ -98,25 +115,37 @@ def main(argv=None) -> int:
       ap.error(f"--{k.replace('_', '-')}: must be {'>= 0' if k in ('warmup', 'damage_weight') else '> 0'}, got {v}")
   if args.budget_seconds is not None and not args.budget_seconds > 0:
     ap.error(f"--budget-seconds: must be > 0, got {args.budget_seconds}")
+  try:
+    hidden = tuple(int(h) for h in args.policy_hidden.split(","))
+    assert hidden and min(hidden) > 0
+  except (ValueError, AssertionError):
+    ap.error(f"--policy-hidden: comma-separated positive ints, got {args.policy_hidden!r}")
   seeds = tuple(range(size["seeds"]))
   slug, desc = device_info()
   t_start = time.perf_counter()
   env = tasks.make(args.task)
   T = E.env_episode_length(env)
 
-  # 1. a mixed dataset: successful safe and unsafe demonstrations
-  parts = {}
-  for i, style in enumerate(("safe", "unsafe")):
-    ds = record(env, tasks.scripted_policy(env, style), size["demos"], seed=100 + i, task=args.task,
-                episode_length=T, chunk=size["chunk"], label=style)
-    parts[style] = curate.successful(ds)
-  data = D.concat([parts["safe"], parts["unsafe"]])
-  kept = {k: int(v.num_episodes) for k, v in parts.items()}
-  print(f"dataset: {kept} successful episodes kept of {size['demos']} each", flush=True)
+  # 1. a mixed dataset: up to --demos successful episodes from each source. Noisy operators by default:
+  # a BC actor of the deterministic scripts never sees a state off their path and drifts (0 % completion
+  # on move_glass_of_water and pick_egg in the CPU check), the operators' corrected tremor shows recoveries.
+  parts, recorded = {}, size["record"] if args.demos_from == "operators" else size["demos"]
+  for i, source in enumerate(SOURCES[args.demos_from]):
+    policy = (operators.make(env, source) if args.demos_from == "operators" else tasks.scripted_policy(env, source))
+    ds = record(env, policy, recorded, seed=100 + i, task=args.task, episode_length=T,
+                chunk=min(size["chunk"], recorded), label=source)
+    ok = np.flatnonzero(np.asarray(ds.success))[: size["demos"]]
+    if len(ok):
+      parts[source] = D.select(D.to_numpy(ds), ok)
+  kept = {k: int(parts[k].num_episodes) if k in parts else 0 for k in SOURCES[args.demos_from]}
+  print(f"dataset: {kept} successful episodes kept (of {recorded} recorded each, at most {size['demos']})", flush=True)
+  if not parts:
+    raise SystemExit(f"dataset: no successful episode in {recorded} of each of {', '.join(kept)}; raise --record")
+  data = D.concat(list(parts.values()))
 
   with tempfile.TemporaryDirectory(prefix="bc_finetune_") as tmp:
     # 2. BC into the PPO actor
-    cfg = PPOConfig.preset(args.preset)
+    cfg = PPOConfig.preset(args.preset, policy_hidden_sizes=hidden)
     t0 = time.perf_counter()
     fit = BA.fit_actor(data, cfg, seeds=seeds, steps=size["bc_steps"], batch=256)
     bc_dir = os.path.join(tmp, "bc")
@@ -132,7 +161,7 @@ def main(argv=None) -> int:
                       critic_warmup_iterations=size["warmup"], damage_weight=size["damage_weight"],
                       num_envs=size["num_envs"], num_timesteps=size["timesteps"],
                       num_eval_envs=size["eval_episodes"], progress=False, plot=False,
-                      time_limit=args.budget_seconds,
+                      time_limit=args.budget_seconds, policy_hidden_sizes=hidden,
                       **({"batch_size": size["num_envs"] // 4, "num_minibatches": 4} if args.quick else {}))
     ft_s = time.perf_counter() - t0
     after = res.final_evals
@@ -140,6 +169,7 @@ def main(argv=None) -> int:
   cmd = "python benchmarks/bc_finetune.py " + " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
   summary = {k: {"before": stats(before, k), "after": stats(after, k)} for k in ("completion", "safe_completion")}
   result = {"command": cmd.strip(), "device": desc, "task": args.task, "preset": args.preset, "size": size,
+            "demos_from": args.demos_from, "policy_hidden": list(hidden),
             "quick": args.quick, "seeds": list(seeds), "dataset_episodes": kept, "bc_seconds": bc_s,
             "finetune_seconds": ft_s, "budget_seconds": args.budget_seconds, "stopped_early": res.stopped_early,
             "wall_seconds": time.perf_counter() - t_start,
@@ -149,8 +179,10 @@ def main(argv=None) -> int:
   write_json(base + ".json", result)
   lines = [f"# BC → PPO fine-tuning with the damage penalty: {args.task} ({desc})", "",
            f"Command: `{result['command']}`", "",
-           f"Dataset: successful scripted demonstrations, {kept['safe']} safe + {kept['unsafe']} unsafe "
-           f"(of {size['demos']} each). BC into the PPO actor ({size['bc_steps']} steps), then PPO from it with "
+           f"Dataset: successful {args.demos_from} demonstrations, "
+           + " + ".join(f"{n} {k}" for k, n in kept.items()) + f" (of {recorded} recorded each, at most "
+           f"{size['demos']}). BC into the PPO actor (hidden {'×'.join(map(str, hidden))}, {size['bc_steps']} "
+           f"steps), then PPO from it with "
            f"damage weight {size['damage_weight']:g}, {size['warmup']} critic warm-up iterations, "
            f"{size['num_envs']} envs × {res.env_steps:,} env steps per seed ({ft_s:.0f} s for all "
            f"{len(seeds)} seeds in one program{'; stopped at the wall-clock budget' if res.stopped_early else ''}). "

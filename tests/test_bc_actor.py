@@ -149,7 +149,8 @@ def test_bc_cli_writes_a_checkpoint_and_refuses_to_overwrite(demos, tmp_path):
 @pytest.mark.parametrize("flags, named", [
     (["--demos", "0"], "--demos"), (["--bc-steps", "-5"], "--bc-steps"),
     (["--damage-weight", "nan"], "--damage-weight"), (["--budget-seconds", "0"], "--budget-seconds"),
-    (["--task", "no_such_task"], "--task")])
+    (["--task", "no_such_task"], "--task"), (["--policy-hidden", "512,0"], "--policy-hidden"),
+    (["--demos-from", "humans"], "--demos-from"), (["--record", "0"], "--record")])
 def test_bc_finetune_bad_flags_exit_2_naming_the_flag(flags, named, capsys):
   """benchmarks/bc_finetune.py refuses bad sizes and budgets before recording or compiling anything."""
   import importlib.util
