@@ -116,11 +116,14 @@ def load_or_export(fn: Callable, args, description: dict, roots: Sequence[str]) 
   ``fn``: a ``jax.jit`` function. ``args``: a tuple of example arguments (arrays or
   pytrees; their values are not used). Returns ``(call, how)`` with ``how`` one of
   ``"loaded"`` (the traced program came from disk: no tracing), ``"exported"``
-  (traced now and stored for the next process) or ``"off"`` (cache disabled:
-  ``fn`` itself).
+  (traced now and stored for the next process) or ``"off"`` (cache disabled, or
+  JAX's GSPMD partitioner on: ``fn`` itself).
   """
   where = directory()
-  if where is None:
+  if where is None or not jax.config.jax_use_shardy_partitioner:
+    # Off under GSPMD (train.mesh switches to it for several devices): jax 0.10.2 exports shard_map
+    # programs with Shardy annotations that GSPMD then refuses to lower ("'stablehlo.custom_call' op
+    # should have a sharding attribute of type TensorShardingPerValueAttr"), in the exporting process too.
     return fn, "off"
   path = os.path.join(where, key(description, args, roots) + SUFFIX)
   if os.path.isfile(path):

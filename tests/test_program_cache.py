@@ -91,6 +91,19 @@ def test_off_returns_the_function(monkeypatch, roots, tmp_path):
   assert how == "off" and call is f
 
 
+def test_off_under_gspmd(cache, roots):
+  """With JAX's GSPMD partitioner on (train.mesh's choice for several devices) nothing is exported or
+  loaded: jax 0.10.2 cannot lower an exported shard_map program there."""
+  f, _ = traced_counter()
+  before = jax.config.jax_use_shardy_partitioner
+  try:
+    jax.config.update("jax_use_shardy_partitioner", False)
+    call, how = P.load_or_export(f, (np.ones(2, np.float32), np.float32(1.0)), {"name": "f"}, roots)
+  finally:
+    jax.config.update("jax_use_shardy_partitioner", before)
+  assert how == "off" and call is f and not cache.exists()
+
+
 def push_policy(env):
   """tests/test_eval.py's scripted pusher policy, op for op: with its env (below) the plain evaluation
   is the program test_eval.py compiles, a persistent-cache hit here (one compile fewer in the suite)."""
