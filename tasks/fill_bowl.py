@@ -4,7 +4,9 @@ Scene (``fill_bowl.xml``): a sink; its basin floor is the plane z = 0. A
 single-lever faucet: the lever of ``turn_on_faucet`` (a round bar on a hinge
 about z at (0.15, 0, 0.2) m, 0 = off, stop at 90°), the spout's outlet at
 (−0.05, 0, 0.30) m. A square bowl (9 × 9 cm cavity, 5 cm deep, 0.3 kg, free)
-stands on the basin floor to one side of the outlet.
+stands on the basin floor to one side of the outlet. The Panda, whose fingers
+open 8 cm, gets an oblong bowl instead: 10.6 × 7 cm outside, 9 × 5.4 cm
+cavity, gripped across its 7 cm (``edit_scene``).
 
 Running water. The liquid model (``mjx_damage.liquid``) never creates or
 destroys particles, so the stream is a fixed pool of 64 particles (radius
@@ -73,13 +75,17 @@ DRAIN_Z = 0.015  # m, a particle this low outside the bowl's footprint lies on t
 SINK_HALF = 0.6  # m, a particle farther than this from the outlet's axis (xy) or below z = −0.2 has left
 BOWL_INNER = 0.045  # m, half width of the cavity
 BOWL_OUTER = 0.053  # m, half width of the bowl
+# Half width across the grip (y) per robot: the Panda's 8 cm stroke cannot span the 10.6 cm bowl, so it
+# gets an oblong one, 10.6 × 7 cm outside (9 × 5.4 cm cavity, 5 cm deep: still ≥ 3 layers of 16 particles
+# above FILL), grasped across its 7 cm like the gripper's bowl with 5 mm of opening to spare per side.
+BOWL_OUTER_Y = {"gripper": BOWL_OUTER}
+NARROW_BOWL_OUTER_Y = 0.035  # m, any other robot
 BOWL_FLOOR, BOWL_RIM = 0.006, 0.056  # m, cavity floor and rim in the bowl frame
 FILL = 24  # particles in the bowl for success
 CLOSE_AT = 32  # particles in the bowl at which the safe policy shuts the faucet
 GRASP_Z = 0.016  # m, grip point (fingertips) height when grasping the bowl on the floor
 CARRY_Z = 0.03  # m, grip point height while carrying (bowl 1.4 cm off the floor)
 HOVER_Z = 0.11  # m
-SQUEEZE_GAP = 2 * BOWL_OUTER - 0.03  # m, commanded gap: 1.5 cm inside each wall (≈ 6 N per pad)
 WIDE_GAP = 0.14  # m
 WITHDRAW = 0.15  # m, unsafe: where the hand waits after letting go, this far −x of the outlet
 
@@ -110,6 +116,22 @@ class FillBowl(Task):
         "max_speed": 2.0,
     }
     return cfg
+
+  bowl_outer = (BOWL_OUTER, BOWL_OUTER)  # m, half widths (x, y); per robot: edit_scene
+  bowl_inner = (BOWL_INNER, BOWL_INNER)
+
+  def edit_scene(self, spec, robot_cls) -> None:
+    oy = BOWL_OUTER_Y.get(robot_cls.name, NARROW_BOWL_OUTER_Y)
+    if oy != BOWL_OUTER:  # the gripper keeps the class's exact constants
+      self.bowl_outer, self.bowl_inner = (BOWL_OUTER, oy), (BOWL_INNER, round(oy - (BOWL_OUTER - BOWL_INNER), 6))
+      b = spec.geom("bowl_bottom")
+      b.size = [b.size[0], oy, b.size[2]]
+      for name, sign in (("bowl_py", 1.0), ("bowl_ny", -1.0)):
+        g = spec.geom(name)
+        g.pos = [g.pos[0], sign * (oy - (BOWL_OUTER - 0.049)), g.pos[2]]
+      for name in ("bowl_px", "bowl_nx"):
+        g = spec.geom(name)
+        g.size = [g.size[0], self.bowl_inner[1], g.size[2]]
 
   def setup(self, m):
     j = m.joint("lever").id
@@ -144,7 +166,8 @@ class FillBowl(Task):
   def in_bowl(self, d, pos):
     """bool[P]: particle inside the bowl's cavity (bowl frame)."""
     q = (pos - d.xpos[self._bowl]) @ d.xmat[self._bowl].reshape(3, 3)
-    return jnp.all(jnp.abs(q[:, :2]) < BOWL_INNER, axis=1) & (q[:, 2] > BOWL_FLOOR) & (q[:, 2] < BOWL_RIM)
+    return (jnp.all(jnp.abs(q[:, :2]) < jnp.asarray(self.bowl_inner), axis=1) & (q[:, 2] > BOWL_FLOOR)
+            & (q[:, 2] < BOWL_RIM))
 
   def update_info(self, d, info):
     """Drain, then release the faucet's particles of this control step (see the module docstring)."""
@@ -152,7 +175,7 @@ class FillBowl(Task):
     pos, vel, active = liq.pos, liq.vel, info["active"]
     # drain: on the basin floor outside the bowl's footprint, or out of the sink
     q = (pos - d.xpos[self._bowl]) @ d.xmat[self._bowl].reshape(3, 3)
-    over_bowl = jnp.all(jnp.abs(q[:, :2]) < BOWL_OUTER, axis=1)
+    over_bowl = jnp.all(jnp.abs(q[:, :2]) < jnp.asarray(self.bowl_outer), axis=1)
     away = jnp.linalg.norm(pos[:, :2] - jnp.asarray(OUTLET[:2]), axis=1) > SINK_HALF
     active = active & ~(((pos[:, 2] < DRAIN_Z) & ~over_bowl) | away | (pos[:, 2] < -0.2))
     # emission: rate × dt particles, the fraction carried over
@@ -212,7 +235,9 @@ class FillBowl(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    squeeze = R.gripper_command_for_gap(SQUEEZE_GAP)
+    half_y = self.bowl_outer[1]
+    squeeze = R.gripper_command_for_gap(2 * half_y - 0.03)  # 1.5 cm inside each wall (≈ 6 N per pad)
+    wide_gap = min(WIDE_GAP, 2 * (robot.finger_range[1] - R.FINGER_HALF_THICK))  # the widest this hand opens
     wide = R.gripper_command_for_gap(WIDE_GAP)
     spot = jnp.array(OUTLET[:2])
 
@@ -221,7 +246,7 @@ class FillBowl(Task):
       e, g, th = robot.eef_pos(d), robot.gap(d), self.angle(d)
       b = self.bowl_pos(d)
       xy_to_bowl = jnp.linalg.norm(e[:2] - b[:2])
-      held = (g < 2 * BOWL_OUTER + 0.006) & (xy_to_bowl < 0.03) & (e[2] < 0.06)
+      held = (g < 2 * half_y + 0.006) & (xy_to_bowl < 0.03) & (e[2] < 0.06)
       placed = (jnp.linalg.norm(b[:2] - spot) < 0.012) & (b[2] < 0.002)
 
       # 1. grasp: rise (from the lever, over it), hover above the bowl, descend, close
@@ -244,7 +269,7 @@ class FillBowl(Task):
       a_bowl = jnp.where(held, a_held, a_grasp)
 
       # 3. after letting go: open, then (safe) rise clear / (unsafe) lift over the rim and withdraw toward −x
-      opened_hand = g > WIDE_GAP - 0.02
+      opened_hand = g > wide_gap - 0.02
       near_bowl = (xy_to_bowl < 0.08) & (e[2] < 0.2)
       a_lever = lever_push_action(e, th, True)
       if safe:

@@ -157,7 +157,7 @@ def test_random_actions_respect_joint_limits_batched():
   _check_random_actions(8, 500, 4)
 
 
-@pytest.mark.parametrize("name", ["place_plate", "pour_water", "shelve_item"])
+@pytest.mark.parametrize("name", ["place_plate", "pour_water", "shelve_item", "fill_bowl"])
 def test_gripper_scenes_unchanged_by_per_robot_edits(name):
   """Tasks that adapt their scene per robot (Task.edit_scene, via MjSpec) compile the gripper's scene exactly
   as the plain XML does."""
@@ -205,6 +205,14 @@ def test_panda_task_adaptations():
   wc = tasks.task_class("wipe_counter")
   assert wc.unsafe_presses.get(tasks.make("wipe_counter", robot="panda").unwrapped.robot_name) == -0.5
   assert wc.unsafe_presses.get(tasks.make("wipe_counter").unwrapped.robot_name) == -1.0
+  # fill_bowl: the Panda's 8 cm stroke gets an oblong bowl, 7 cm across the grip (cavity 5.4 cm)
+  b = tasks.make("fill_bowl", robot="panda").unwrapped
+  mb = b.mj_model
+  assert b.bowl_outer == (0.053, 0.035) and b.bowl_inner == pytest.approx((0.045, 0.027))
+  np.testing.assert_allclose(mb.geom_size[mb.geom("bowl_bottom").id], [0.053, 0.035, 0.003])
+  np.testing.assert_allclose(mb.geom_pos[mb.geom("bowl_py").id][1], 0.031)
+  np.testing.assert_allclose(mb.geom_size[mb.geom("bowl_px").id][1], 0.027)
+  assert tasks.make("fill_bowl").unwrapped.bowl_outer == (0.053, 0.053)
   # open_single_door: the palm clears the handle, so shorter fingers grasp higher
   assert tasks.make("open_single_door").unwrapped.grip_dz == OD.GRIP_DZ
   assert tasks.make("open_single_door", robot="panda").unwrapped.grip_dz + P.FINGER_LENGTH == pytest.approx(
