@@ -7,9 +7,13 @@ subprocesses the tests start compile into (and read from) the same cache as the 
 ``task_rollout(name)`` (session fixture): the task contract's one compiled batched rollout of a
 registered task, memoised for the whole run, so every test file that needs a task's MJX rollout
 (tests/test_task_contract.py, tests/test_native_agreement.py) shares one compile per task.
+
+``load_benchmark(name)``: ``benchmarks/<name>.py`` as a module (the scripts are not a package), for
+tests of their argument checks and helpers.
 """
 
 import functools
+import importlib.util
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -21,6 +25,17 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import tasks  # noqa: E402
+
+BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks")
+
+
+def load_benchmark(name: str):
+  """``benchmarks/<name>.py`` imported as module ``name``."""
+  spec = importlib.util.spec_from_file_location(name, os.path.join(BENCHMARKS, name + ".py"))
+  module = importlib.util.module_from_spec(spec)
+  spec.loader.exec_module(module)
+  return module
+
 
 if jax.config.jax_compilation_cache_dir:
   os.environ["JAX_COMPILATION_CACHE_DIR"] = jax.config.jax_compilation_cache_dir

@@ -7,6 +7,7 @@ import os
 import jax
 import numpy as np
 import pytest
+from conftest import load_benchmark
 
 import train
 from mjx_damage import data as D
@@ -153,12 +154,7 @@ def test_bc_cli_writes_a_checkpoint_and_refuses_to_overwrite(demos, tmp_path):
     (["--demos-from", "humans"], "--demos-from"), (["--record", "0"], "--record")])
 def test_bc_finetune_bad_flags_exit_2_naming_the_flag(flags, named, capsys):
   """benchmarks/bc_finetune.py refuses bad sizes and budgets before recording or compiling anything."""
-  import importlib.util
-  spec = importlib.util.spec_from_file_location(
-      "bc_finetune", os.path.join(os.path.dirname(os.path.dirname(__file__)), "benchmarks", "bc_finetune.py"))
-  mod = importlib.util.module_from_spec(spec)
-  spec.loader.exec_module(mod)
   with pytest.raises(SystemExit) as e:
-    mod.main(flags)
+    load_benchmark("bc_finetune").main(flags)
   assert e.value.code == 2
   assert named in capsys.readouterr().err

@@ -7,6 +7,7 @@ import json
 import mujoco
 import numpy as np
 import pytest
+from conftest import load_benchmark
 
 from apps import bench
 from mjx_damage import bind
@@ -192,13 +193,7 @@ def test_bench_end_to_end(tmp_path):
 
 def test_warp_scaling_plan_and_report(capsys):
   """benchmarks/warp_scaling.py: bad plan points are rejected before anything runs; ratios are per config."""
-  import importlib.util
-  import os
-
-  path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "warp_scaling.py")
-  spec = importlib.util.spec_from_file_location("warp_scaling", path)
-  W = importlib.util.module_from_spec(spec)
-  spec.loader.exec_module(W)
+  W = load_benchmark("warp_scaling")
   for bad in ("warp-cg:sweep:2:3", "cuda:sweep:1:1", "jax-cg:spin:1:1", "jax-cg:sweep:1"):
     with pytest.raises(SystemExit):
       W.main(["--plan", bad, "--out", "unused.json"])

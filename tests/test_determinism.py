@@ -36,21 +36,16 @@ Findings (XLA:CPU, jaxlib 0.10.2; ``benchmarks``-free, rerun with ``-m slow``):
   holds for the sizes tested here, which is what the tests pin down.
 """
 
-import importlib.util
-import os
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import load_benchmark
 
 import tasks
 
 # the rollout and comparison helpers are benchmarks/determinism.py's (its GPU run uses the same ones)
-_spec = importlib.util.spec_from_file_location(
-    "determinism", os.path.join(os.path.dirname(__file__), "..", "benchmarks", "determinism.py"))
-_det = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_det)
+_det = load_benchmark("determinism")
 
 STEPS = 20
 KEYS = jax.random.split(jax.random.PRNGKey(7), 8)

@@ -5,22 +5,17 @@ The full soak (every task, the results file) is ``benchmarks/soak.py``; the
 extreme-action checks are tests/test_task_contract.py's).
 """
 
-import importlib.util
-import os
-
 import jax
 import jax.numpy as jnp
 import pytest
 from brax.envs.base import Wrapper
+from conftest import load_benchmark
 
 import mjx_damage as md
 import tasks
 from tasks.drop import DropEnv
 
-_path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "soak.py")
-_spec = importlib.util.spec_from_file_location("soak", _path)
-soak = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(soak)
+soak = load_benchmark("soak")
 
 
 def run_soak(env, envs, chunks, chunk, extreme_frac, episode_length=None, seed=0) -> dict:

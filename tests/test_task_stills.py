@@ -3,18 +3,15 @@
 The end-to-end render of one task (one MJX compile) is ``@pytest.mark.slow``.
 """
 
-import importlib.util
 import json
 import os
 
 import numpy as np
 import pytest
 from PIL import Image
+from conftest import load_benchmark
 
-_path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "task_stills.py")
-_spec = importlib.util.spec_from_file_location("task_stills", _path)
-stills = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(stills)
+stills = load_benchmark("task_stills")
 
 
 @pytest.mark.parametrize("args, message", [
