@@ -126,9 +126,9 @@ class FillBowl(Task):
       self.bowl_outer, self.bowl_inner = (BOWL_OUTER, oy), (BOWL_INNER, round(oy - (BOWL_OUTER - BOWL_INNER), 6))
       b = spec.geom("bowl_bottom")
       b.size = [b.size[0], oy, b.size[2]]
-      for name, sign in (("bowl_py", 1.0), ("bowl_ny", -1.0)):
+      for name in ("bowl_py", "bowl_ny"):  # each wall moves in by the narrowing
         g = spec.geom(name)
-        g.pos = [g.pos[0], sign * (oy - (BOWL_OUTER - 0.049)), g.pos[2]]
+        g.pos = [g.pos[0], g.pos[1] - math.copysign(BOWL_OUTER - oy, g.pos[1]), g.pos[2]]
       for name in ("bowl_px", "bowl_nx"):
         g = spec.geom(name)
         g.size = [g.size[0], self.bowl_inner[1], g.size[2]]
