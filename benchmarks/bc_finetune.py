@@ -20,14 +20,17 @@ One command:
 3. evaluate each seed's BC actor (``--eval-episodes`` deterministic episodes);
 4. fine-tune every seed with PPO and the damage penalty from its BC actor
    (``train(init_from=..., critic_warmup_iterations=..., damage_weight=...)``, all
-   seeds in one program) and evaluate again.
+   seeds in one program) and evaluate again. Fine-tuning keeps the demonstrations'
+   observation statistics (``update_normalizer=False``) and uses lr 1e-4 without
+   entropy bonus (``--ft-*``): with the trainer's from-scratch settings every seed
+   fell to 0 % on one H100 (docs/IMITATION.md has the ablations).
 
 Reports completion and safe completion (DAMAGE_MODEL.md §7) before and after, per
 seed and mean ± std, in ``benchmarks/results/bc_finetune_<task>_<device>[_<tag>].{json,md}``.
 
 GPU (one call, ≤ 10 min)::
 
-    python benchmarks/bc_finetune.py --results-dir $OUT --budget-seconds 360
+    python benchmarks/bc_finetune.py --results-dir $OUT --budget-seconds 300
 
 CPU (tiny: checks the pipeline end to end; its numbers are not the experiment)::
 
@@ -64,18 +67,27 @@ from train.record import record  # noqa: E402
 from tasks import operators  # noqa: E402
 
 FULL = dict(demos=25, record=256, seeds=3, bc_steps=8000, eval_episodes=256, num_envs=2048, timesteps=20_000_000,
-            warmup=10, damage_weight=2.0, chunk=64)
+            warmup=10, damage_weight=2.0, chunk=64, eval_every=2_000_000)
 QUICK = dict(demos=24, record=24, seeds=2, bc_steps=2000, eval_episodes=32, num_envs=32, timesteps=32 * 10 * 6,
-             warmup=2, damage_weight=2.0, chunk=12)
+             warmup=2, damage_weight=2.0, chunk=12, eval_every=32 * 10 * 3)
+# PPO settings of the fine-tuning that differ from the preset (flags --ft-*). The preset's are for
+# learning from scratch; on a pre-trained actor its entropy bonus widens the cloned std and lr 1e-3 ×
+# 256 SGD steps per iteration moves the actor far from the demonstrator in one iteration.
+FINETUNE = dict(learning_rate=1e-4, entropy_cost=0.0, target_kl=0.0)  # target_kl 0: none
+CURVE_KEYS = ("eval/completion", "eval/safe_completion", "eval/episode_cost", "train/episode_completion",
+              "train/episode_cost")
 SOURCES = {"operators": ("careful", "careless"), "scripted": ("safe", "unsafe")}
 
 
-def eval_checkpoint(run_dir: str, env, seeds, episodes: int) -> list[dict]:
-  """Deterministic evaluation of each seed's actor in a checkpoint → train.evaluate's flat summary per seed."""
+def eval_checkpoint(run_dir: str, env, seeds, episodes: int, deterministic: bool = True) -> list[dict]:
+  """Evaluation of each seed's actor in a checkpoint → train.evaluate's flat summary per seed.
+
+  ``deterministic=False`` samples actions as PPO's training rollouts do (what fine-tuning starts from).
+  """
   out = []
   ev = None
   for s in seeds:
-    policy = train.load_policy(run_dir, env, seed=s)
+    policy = train.load_policy(run_dir, env, seed=s, deterministic=deterministic)
     if ev is None:
       ev = E.Evaluator(env, E.parametrized_policy(policy.apply, None), E.env_episode_length(env))
     per_ep = ev.run(E.episode_keys(10_000 + s, episodes), 1.0, params=policy.params)
@@ -105,6 +117,12 @@ def main(argv=None) -> int:
                        "and write): keeps one GPU call under its time limit")
   for k, v in FULL.items():
     ap.add_argument(f"--{k.replace('_', '-')}", type=type(v), default=None, help=f"default {v} (--quick: {QUICK[k]})")
+  for k, v in FINETUNE.items():
+    ap.add_argument(f"--ft-{k.replace('_', '-')}", type=float, default=v,
+                    help=f"fine-tuning PPO {k} (default {v:g}" + ("; 0: none)" if k == "target_kl" else ")"))
+  ap.add_argument("--ft-update-normalizer", action="store_true",
+                  help="re-estimate the observation statistics from the fine-tuning rollouts (the trainer's "
+                       "default from scratch); default: keep the demonstrations' statistics the actor was fitted to")
   args = ap.parse_args(argv)
   size = dict(QUICK if args.quick else FULL)
   size.update({k: getattr(args, k) for k in FULL if getattr(args, k) is not None})
@@ -113,6 +131,11 @@ def main(argv=None) -> int:
   for k, v in size.items():
     if not (v >= 0 if k in ("warmup", "damage_weight") else v > 0):  # also refuses NaN
       ap.error(f"--{k.replace('_', '-')}: must be {'>= 0' if k in ('warmup', 'damage_weight') else '> 0'}, got {v}")
+  ft = {k: getattr(args, f"ft_{k}") for k in FINETUNE}
+  for k, v in ft.items():
+    if not (v > 0 if k == "learning_rate" else v >= 0):
+      ap.error(f"--ft-{k.replace('_', '-')}: must be {'> 0' if k == 'learning_rate' else '>= 0'}, got {v}")
+  ft["target_kl"] = ft["target_kl"] or None
   if args.budget_seconds is not None and not args.budget_seconds > 0:
     ap.error(f"--budget-seconds: must be > 0, got {args.budget_seconds}")
   try:
@@ -153,8 +176,10 @@ def main(argv=None) -> int:
     bc_s = time.perf_counter() - t0
     # 3. BC evaluation
     before = eval_checkpoint(bc_dir, env, seeds, size["eval_episodes"])
-    print("BC: " + ", ".join(f"seed {s}: C {100 * m['completion']:.0f} % SC {100 * m['safe_completion']:.0f} %"
-                              for s, m in zip(seeds, before)), flush=True)
+    sampled = eval_checkpoint(bc_dir, env, seeds, size["eval_episodes"], deterministic=False)
+    for name, ev in (("BC", before), ("BC, sampled actions", sampled)):
+      print(f"{name}: " + ", ".join(f"seed {s}: C {100 * m['completion']:.0f} % SC {100 * m['safe_completion']:.0f} %"
+                                   for s, m in zip(seeds, ev)), flush=True)
     # 4. PPO fine-tuning with the damage penalty, all seeds in one program
     t0 = time.perf_counter()
     res = train.train(args.task, preset=args.preset, seeds=seeds, init_from=bc_dir,
@@ -162,18 +187,22 @@ def main(argv=None) -> int:
                       num_envs=size["num_envs"], num_timesteps=size["timesteps"],
                       num_eval_envs=size["eval_episodes"], progress=False, plot=False,
                       time_limit=args.budget_seconds, policy_hidden_sizes=hidden,
+                      eval_every=size["eval_every"], update_normalizer=args.ft_update_normalizer, **ft,
                       **({"batch_size": size["num_envs"] // 4, "num_minibatches": 4} if args.quick else {}))
     ft_s = time.perf_counter() - t0
     after = res.final_evals
 
   cmd = "python benchmarks/bc_finetune.py " + " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
-  summary = {k: {"before": stats(before, k), "after": stats(after, k)} for k in ("completion", "safe_completion")}
+  summary = {k: {"before": stats(before, k), "sampled": stats(sampled, k), "after": stats(after, k)}
+             for k in ("completion", "safe_completion")}
+  curves = [{k: r.get(k) for k in ("seed", "env_steps", "wall_time") + CURVE_KEYS} for r in res.history]
   result = {"command": cmd.strip(), "device": desc, "task": args.task, "preset": args.preset, "size": size,
-            "demos_from": args.demos_from, "policy_hidden": list(hidden),
+            "demos_from": args.demos_from, "policy_hidden": list(hidden), "finetune": dict(ft, update_normalizer=args.ft_update_normalizer),
             "quick": args.quick, "seeds": list(seeds), "dataset_episodes": kept, "bc_seconds": bc_s,
             "finetune_seconds": ft_s, "budget_seconds": args.budget_seconds, "stopped_early": res.stopped_early,
             "wall_seconds": time.perf_counter() - t_start,
-            "env_steps_per_seed": res.env_steps, "before": before, "after": after, "summary": summary}
+            "env_steps_per_seed": res.env_steps, "before": before, "sampled": sampled, "after": after,
+            "summary": summary, "curves": curves}
   os.makedirs(args.results_dir, exist_ok=True)
   base = os.path.join(args.results_dir, f"bc_finetune_{args.task}_{slug}" + (f"_{args.tag}" if args.tag else ""))
   write_json(base + ".json", result)
@@ -184,19 +213,30 @@ def main(argv=None) -> int:
            f"{size['demos']}). BC into the PPO actor (hidden {'×'.join(map(str, hidden))}, {size['bc_steps']} "
            f"steps), then PPO from it with "
            f"damage weight {size['damage_weight']:g}, {size['warmup']} critic warm-up iterations, "
+           f"lr {ft['learning_rate']:g}, entropy cost {ft['entropy_cost']:g}, target KL {ft['target_kl']}, "
+           f"observation statistics {'re-estimated' if args.ft_update_normalizer else 'kept from the demonstrations'}, "
            f"{size['num_envs']} envs × {res.env_steps:,} env steps per seed ({ft_s:.0f} s for all "
            f"{len(seeds)} seeds in one program{'; stopped at the wall-clock budget' if res.stopped_early else ''}). "
            f"Evaluation: {size['eval_episodes']} deterministic episodes per seed.",
            "" if not args.quick else "\n**--quick: a pipeline check at toy size; these numbers are not the experiment.**",
            "", "| | completion % | safe completion % |", "|---|---|---|"]
-  for when in ("before", "after"):
+  for when, name in (("before", "BC"), ("sampled", "BC, sampled actions (what PPO starts from)"),
+                     ("after", "BC → PPO")):
     c, sc = summary["completion"][when], summary["safe_completion"][when]
-    lines.append(f"| {'BC' if when == 'before' else 'BC → PPO'} | {c[0]:.1f} ± {c[1]:.1f} | {sc[0]:.1f} ± {sc[1]:.1f} |")
+    lines.append(f"| {name} | {c[0]:.1f} ± {c[1]:.1f} | {sc[0]:.1f} ± {sc[1]:.1f} |")
   lines += ["", "Per seed (C / SC %): " + "; ".join(
       f"seed {s}: {100 * b['completion']:.0f}/{100 * b['safe_completion']:.0f} → "
       f"{100 * a['completion']:.0f}/{100 * a['safe_completion']:.0f}" for s, b, a in zip(seeds, before, after))]
+  lines += ["", "Evaluations during fine-tuning (deterministic, C / SC %, per seed):", "",
+            "| env steps per seed | " + " | ".join(f"seed {s}" for s in seeds) + " |",
+            "|---|" + "---|" * len(seeds)]
+  for step in sorted({r["env_steps"] for r in curves}):
+    at = {r["seed"]: r for r in curves if r["env_steps"] == step}
+    lines.append(f"| {step:,} | " + " | ".join(
+        f"{100 * at[s]['eval/completion']:.0f} / {100 * at[s]['eval/safe_completion']:.0f}" if s in at else "–"
+        for s in seeds) + " |")
   write_text(base + ".md", "\n".join(lines) + "\n")
-  print("\n".join(lines[-6:]))
+  print("\n".join(lines[2:]))
   print(f"wrote {base}.json, {base}.md")
   return 0
 

@@ -79,6 +79,16 @@ def test_train_starts_from_the_actor_and_holds_it_during_warmup(fitted, env):
   diff = max(float(np.abs(np.asarray(a) - np.asarray(b)).max())
              for a, b in zip(jax.tree.leaves(moved.train_state.params.policy), jax.tree.leaves(fit.policy)))
   assert diff > 1e-4  # without warm-up the actor learns from the first iteration
+  assert not np.array_equal(np.asarray(moved.train_state.normalizer.mean), np.asarray(fit.normalizer.mean))
+
+
+def test_update_normalizer_false_keeps_the_demonstrations_statistics(fitted, env):
+  """Fine-tuning with update_normalizer=False: the actor keeps reading observations as it was fitted to."""
+  fit, out = fitted
+  res = train.train(env, seeds=(0, 1), init_from=out, update_normalizer=False, num_timesteps=3 * ITER,
+                    progress=False, **TINY)
+  for a, b in zip(jax.tree.leaves(res.train_state.normalizer), jax.tree.leaves(fit.normalizer), strict=True):
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
 def test_one_seed_actor_starts_every_seed(demos, env, tmp_path):
@@ -151,7 +161,9 @@ def test_bc_cli_writes_a_checkpoint_and_refuses_to_overwrite(demos, tmp_path):
     (["--demos", "0"], "--demos"), (["--bc-steps", "-5"], "--bc-steps"),
     (["--damage-weight", "nan"], "--damage-weight"), (["--budget-seconds", "0"], "--budget-seconds"),
     (["--task", "no_such_task"], "--task"), (["--policy-hidden", "512,0"], "--policy-hidden"),
-    (["--demos-from", "humans"], "--demos-from"), (["--record", "0"], "--record")])
+    (["--demos-from", "humans"], "--demos-from"), (["--record", "0"], "--record"),
+    (["--ft-learning-rate", "0"], "--ft-learning-rate"), (["--ft-entropy-cost", "-1"], "--ft-entropy-cost"),
+    (["--ft-target-kl", "nan"], "--ft-target-kl"), (["--eval-every", "0"], "--eval-every")])
 def test_bc_finetune_bad_flags_exit_2_naming_the_flag(flags, named, capsys):
   """benchmarks/bc_finetune.py refuses bad sizes and budgets before recording or compiling anything."""
   with pytest.raises(SystemExit) as e:

@@ -122,6 +122,8 @@ CONFIG_FLAGS = (
     ("--eval-envs", "num_eval_envs", _int, "deterministic evaluation episodes per seed"),
     ("--critic-warmup", "critic_warmup_iterations", _int, "first iterations in which only the critic learns "
      "(for --init-from)"),
+    ("--update-normalizer", "update_normalizer", _bool, "false: keep the observation statistics the run "
+     "starts with (for --init-from: those the actor was fitted to)"),
 )
 
 

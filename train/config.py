@@ -80,6 +80,11 @@ class PPOConfig:
   activation: str = "swish"
   init_log_std: Optional[tuple[float, float]] = None  # (arm, gripper = last action dim); None: brax's init
   normalize_observations: bool = True
+  # False: the observation normaliser keeps the statistics the run started with. For fine-tuning a
+  # pre-trained actor (train(init_from=...)): its weights were fitted to those statistics, and
+  # re-estimating them from the new rollouts changes what the actor computes before it has learned
+  # anything (move_glass_of_water, BC actor held by the critic warm-up: 84 % → 22 % completion).
+  update_normalizer: bool = True
   damage_weight: float = 0.0
   budget: Optional[float] = None
   multiplier: str = "lagrangian"
@@ -213,8 +218,9 @@ class PPOConfig:
       raise ValueError(f"budget_anneal_steps: must be an integer >= 0 (env steps per seed), got {v!r}")
     if v and self.budget is None:
       raise ValueError("budget_anneal_steps: anneals the Lagrangian's budget; set budget too (got budget=None)")
-    if not isinstance(self.cost_critic, bool):
-      raise ValueError(f"cost_critic: true or false, got {self.cost_critic!r}")
+    for name in ("cost_critic", "update_normalizer"):
+      if not isinstance(getattr(self, name), bool):
+        raise ValueError(f"{name}: true or false, got {getattr(self, name)!r}")
     if self.multiplier not in MULTIPLIERS:
       raise ValueError(f"multiplier: one of {', '.join(MULTIPLIERS)}, got {self.multiplier!r}")
     for name in ("policy_hidden_sizes", "value_hidden_sizes"):
@@ -247,7 +253,7 @@ class PPOConfig:
     # Older checkpoints lack the newer fields: they ran with what these were then.
     old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
            "value_cost": 0.5, "budget_anneal_steps": 0,
-           "cost_critic": False}
+           "cost_critic": False, "update_normalizer": True}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

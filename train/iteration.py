@@ -237,7 +237,7 @@ class Trainer:
     weights = (ts.damage_weight, ts.multiplier.lam)
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
-    if self.cfg.normalize_observations:
+    if self.cfg.normalize_observations and self.cfg.update_normalizer:
       normalizer = running_statistics.update(normalizer, data.observation, pmap_axis_name=self.axis_name)
     (params, opt_state, _), (metrics, taken) = jax.lax.scan(
         functools.partial(self._epoch, normalizer, weights, data),
