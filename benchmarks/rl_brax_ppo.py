@@ -13,7 +13,7 @@ completion, safe completion, average env health, episode cost).
 
 Rows go to ``benchmarks/results/rl_brax_<task>_<device>.{json,md}`` (or
 ``--out STEM``), one per (damage weight, seed), each with its exact command;
-rows of other (weight, seed) pairs already in the file are kept, so one call per
+rows of other runs (weight, seed or settings) already in the file are kept, so one call per
 run builds one table. ``--budget-seconds`` stops a run at the first evaluation
 after that much training wall time (the policy of that evaluation is scored).
 
@@ -34,7 +34,9 @@ CPU plumbing check (learns nothing)::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
+import json
 import os
 import platform
 import re
@@ -53,7 +55,9 @@ from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
 import tasks  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
+from train.config import PPOConfig  # noqa: E402
 from train.evaluate import evaluate, parametrized_policy  # noqa: E402
+from train.networks import init_policy  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 RL_SETTINGS = tasks.RL_SETTINGS  # the setting each task is trained in (issue 24)
@@ -75,6 +79,29 @@ class _Budget(Exception):
 def device_slug() -> str:
   kind = jax.devices()[0].device_kind
   return re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_") or jax.default_backend()
+
+
+def network_factory(init_log_std: tuple[float, float] | None):
+  """The recipe's ``make_ppo_networks``; with ``init_log_std`` (arm, gripper = last action dim) its
+  policy starts at that per-dimension std (pre-tanh) in every state.
+
+  Brax's tanh-normal policy has no std parameter (``make_ppo_networks`` ignores its noise-std
+  arguments for it): the scale is ``softplus(last layer) + 0.001``. The same initialisation as our
+  trainer's (train.networks.init_policy, reused here: it only sets initial weights, nothing of the
+  training): the last layer's std half gets zero weights and the bias ``softplus⁻¹(std − 0.001)``.
+  """
+  base = functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=POLICY_LAYERS,
+                           value_hidden_layer_sizes=VALUE_LAYERS)
+  if init_log_std is None:
+    return base
+
+  def make(observation_size, action_size, **kw):
+    nets = base(observation_size, action_size, **kw)
+    cfg = PPOConfig(init_log_std=tuple(init_log_std))
+    init = functools.partial(init_policy, nets, cfg, action_size)
+    return nets.replace(policy_network=dataclasses.replace(nets.policy_network, init=init))
+
+  return make
 
 
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None) -> dict:
@@ -106,8 +133,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         batch_size=cfg["batch_size"], num_minibatches=cfg["num_minibatches"],
         num_updates_per_batch=cfg["num_updates_per_batch"], num_resets_per_eval=cfg["num_resets_per_eval"],
         normalize_observations=cfg["normalize_observations"], reward_scaling=cfg["reward_scaling"],
-        network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=POLICY_LAYERS,
-                                          value_hidden_layer_sizes=VALUE_LAYERS),
+        network_factory=network_factory(cfg.get("init_log_std")),
         num_evals=cfg["num_evals"], num_eval_envs=cfg["num_eval_envs"], seed=seed,
         progress_fn=progress, policy_params_fn=keep_params)
   except _Budget:
@@ -132,6 +158,16 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   }
 
 
+def _std_label(row: dict) -> str:
+  std = row.get("recipe", {}).get("init_log_std")
+  return "" if std is None else f", initial log-std {std[0]:g}/{std[1]:g}"
+
+
+def _key(row: dict):
+  """A rerun with the same weight, seed and settings replaces its row; other rows are kept."""
+  return row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True)
+
+
 def render_md(doc: dict) -> str:
   lines = [
       f"# Brax PPO (brax.training.agents.ppo.train) on {doc['task']}: task-only vs damage penalty",
@@ -149,10 +185,11 @@ def render_md(doc: dict) -> str:
   ]
   for r in doc["rows"]:
     lines.append(
-        f"| {r['reward']} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
+        f"| {r['reward']}{_std_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
-        f"| {r['eval_episodes']} | `{r['command']}` |")
+        f"| {r['eval_episodes']} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
+  lines += [""] + doc.get("notes", []) if doc.get("notes") else []
   return "\n".join(lines) + "\n"
 
 
@@ -183,6 +220,9 @@ def parse_args(argv=None):
   p.add_argument("--num-eval-envs", type=int, default=pc["num_eval_envs"])
   p.add_argument("--num-resets-per-eval", type=int, default=pc["num_resets_per_eval"])
   p.add_argument("--eval-episodes", type=int, default=1024)
+  p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
+                 help="initial log-std of the policy (pre-tanh; gripper = last action dim), as our trainer's "
+                      "--init-log-std; write --init-log-std=-0.5,-1.5. Default: brax's init (std ≈ 1.3)")
   p.add_argument("--out-dir", default=RESULTS)
   p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
   a = p.parse_args(argv)
@@ -204,6 +244,10 @@ def parse_args(argv=None):
                      f"got {a.num_envs}")
   if a.budget_seconds is not None and a.budget_seconds <= 0:
     raise ValueError(f"budget_seconds: must be > 0, got {a.budget_seconds}")
+  if a.init_log_std is not None:
+    a.init_log_std = tuple(_csv(a.init_log_std, float, "init_log_std"))
+    if len(a.init_log_std) != 2 or not all(-5.0 <= v <= 2.0 for v in a.init_log_std):  # also refuses NaN
+      raise ValueError(f"init_log_std: ARM,GRIPPER, each in [-5, 2], got {a.init_log_std}")
   return a
 
 
@@ -214,16 +258,15 @@ def main(argv=None) -> int:
   cfg = dict(PLAYGROUND_PANDA_PICK_CUBE, num_timesteps=a.num_timesteps, num_envs=a.num_envs,
              batch_size=a.batch_size, num_minibatches=a.num_minibatches, unroll_length=a.unroll_length,
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
-             eval_episodes=a.eval_episodes)
+             eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}))
   stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
   doc = {"task": a.task, "task_settings": RL_SETTINGS.get(a.task, {}), "device": jax.devices()[0].device_kind,
          "backend": jax.default_backend(), "jax": jax.__version__, "machine": platform.machine(),
          "recipe": {k: v for k, v in cfg.items() if k != "eval_episodes"}, "rows": []}
-  if os.path.exists(stem + ".json"):  # keep rows of other (weight, seed) runs: one call per run builds one table
-    import json
-
+  if os.path.exists(stem + ".json"):  # keep rows of other runs: one call per run builds one table
     with open(stem + ".json") as f:
-      doc["rows"] = json.load(f).get("rows", [])
+      old = json.load(f)
+    doc["rows"], doc["notes"] = old.get("rows", []), old.get("notes", [])  # notes: written by hand
   for w in a.weights:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
@@ -232,8 +275,9 @@ def main(argv=None) -> int:
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "
             f"{row['env_steps']} env-steps, {row['train_wall_s']} s", flush=True)
-      doc["rows"] = [r for r in doc["rows"] if (r["damage_weight"], r["seed"]) != (w, s)] + [row]
-      doc["rows"].sort(key=lambda r: (r["damage_weight"], r["seed"]))
+      doc["rows"] = [r for r in doc["rows"] if _key(r) != _key(row)] + [row]
+      doc["rows"].sort(key=lambda r: (r["damage_weight"], r.get("recipe", {}).get("init_log_std") is not None,
+                                      r["seed"], r["env_steps"]))
       write_json(stem + ".json", doc)  # after every run: a timeout keeps the finished ones
       write_text(stem + ".md", render_md(doc))
   print(f"wrote {stem}.json / .md")

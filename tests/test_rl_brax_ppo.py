@@ -1,0 +1,38 @@
+"""benchmarks/rl_brax_ppo.py: the second trainer's settings are what it says (no training here)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from conftest import load_benchmark
+
+R = load_benchmark("rl_brax_ppo")
+
+
+def _initial_scale(factory, obs_size=5, action_size=4):
+  nets = factory(obs_size, action_size)
+  params = nets.policy_network.init(jax.random.PRNGKey(0))
+  logits = nets.policy_network.apply(None, params, jax.random.normal(jax.random.PRNGKey(1), (3, obs_size)))
+  return np.asarray(nets.parametric_action_distribution.create_dist(logits).scale)
+
+
+def test_init_log_std_is_the_policys_initial_std_in_every_state():
+  """--init-log-std=-0.5,-1.5: brax's tanh-normal head starts at exp(-0.5) on the arm dims and exp(-1.5)
+  on the gripper (last) dim, whatever the observation."""
+  scale = _initial_scale(R.network_factory((-0.5, -1.5)))
+  np.testing.assert_allclose(scale[:, :-1], np.exp(-0.5), rtol=1e-5)
+  np.testing.assert_allclose(scale[:, -1], np.exp(-1.5), rtol=1e-5)
+
+
+def test_default_is_brax_init():
+  """Without the flag the std is brax's own (state-dependent, ≈ softplus(0) + 0.001 ± the init's spread)."""
+  scale = _initial_scale(R.network_factory(None))
+  assert not np.allclose(scale, scale[0, 0])  # state- and dimension-dependent: nothing was overridden
+  assert 0.2 < scale.mean() < 2.0
+
+
+@pytest.mark.parametrize("value", ["-0.5", "-0.5,nan", "-0.5,-9", "a,b", "-0.5,-1.5,0"])
+def test_bad_init_log_std_is_refused_naming_it(value):
+  with pytest.raises(ValueError, match="init_log_std"):
+    R.parse_args([f"--init-log-std={value}"])
