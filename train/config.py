@@ -84,7 +84,7 @@ class PPOConfig:
   # pre-trained actor (train(init_from=...)): its weights were fitted to those statistics, and
   # re-estimating them from the new rollouts changes what the actor computes before it has learned
   # anything (benchmarks/bc_finetune.py ablation, move_glass_of_water: 88–89 % vs 4–35 % completion at
-  # the first evaluation, 93.6 → 81.4 % vs 100 % at the end; docs/IMITATION.md).
+  # the first evaluation, 81.4 % vs 100 % at the end; docs/IMITATION.md).
   update_normalizer: bool = True
   damage_weight: float = 0.0
   budget: Optional[float] = None
