@@ -50,9 +50,12 @@ nothing).
 
 Observation (``full``): [proprio (8); dish pos (3) + quat (4) + lin. vel (3)] = 18.
 
-Robot: designed and tuned for the default floating gripper. The 10 cm dish is
-wider than the Panda hand's 8 cm stroke, so with ``robot="panda"`` the scripted
-policies cannot grasp it (no per-robot scene edit yet).
+Robot: designed and tuned for the default floating gripper. With
+``robot="panda"`` the scripted policies fail for two reasons. The 10 cm dish is wider
+than the hand's 8 cm stroke. And the hand is held pointing down, so with the grip point
+at the dish's mid-height (7.5 cm) the joint-7 frame is 22 cm higher (29.5 cm), above the
+cavity's 25 cm ceiling: the arm cannot reach in. The Panda needs a forward-facing hand
+for this task.
 """
 
 from __future__ import annotations

@@ -36,6 +36,11 @@ wall (≈ 100 N), then it lets go. Safe strategy: line the mug up in front of th
 down, open just enough to clear it and back out before rising.
 
 Observation (``full``): [proprio (8); mug pos (3); mug quat (4); mug lin. vel (3)] = 18.
+
+Robot: designed and tuned for the default floating gripper. With ``robot="panda"``
+the hand is held pointing down, so at the spout its joint-7 frame (22 cm above the
+grip point) would be inside the brew head, which starts 17 cm up. The scripted
+policies cannot complete; the Panda needs a forward-facing hand for this task.
 """
 
 from __future__ import annotations
