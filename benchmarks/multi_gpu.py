@@ -17,6 +17,10 @@ evaluation episodes):
   over ``--repeats`` calls after a warm-up call: env-steps/s = episodes ×
   episode length / s.
 
+``--profile`` adds, per D, one iteration of the last repeat split into
+rollout (env steps + inference) and update (SGD with its all-reduces), and the
+JSON keeps every repeat's first-iteration (compile) time.
+
 Writes ``benchmarks/results/multi_gpu_<device>.json`` and ``.md`` (rates per
 repeat, mean, min–max spread, speedup over 1 device) and ``_curves.png``.
 
@@ -72,6 +76,9 @@ def parse(argv=None):
   p.add_argument("--fragility", default="0.5,1,2,4", help="sweep levels of the evaluation batch")
   p.add_argument("--policy", default="random", help="evaluation policy spec (apps.resolve)")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  p.add_argument("--profile", action="store_true",
+                 help="after the last repeat, time one iteration split into rollout and update (train(profile=True)): "
+                      "where the scaling is lost")
   p.add_argument("--append", action="store_true", help="keep the other device counts' rows of an earlier results file")
   args = p.parse_args(argv)
   if args.repeats < 2:
@@ -116,17 +123,23 @@ def train_runs(args, d: int) -> dict:
     sizes["batch_size"] = per_dev_batch * d
   spi = PPOConfig.preset(args.preset, **sizes).steps_per_iteration
   sizes.update(num_timesteps=args.iterations * spi, eval_every=spi * max(1, args.iterations // args.eval_points))
-  rates, curve, res = [], None, None
+  rates, compiles, curve, res = [], [], None, None
   for r in range(args.repeats):
-    res = train(args.task, preset=args.preset, seeds=args.seeds, devices=d, progress=False, plot=False, **sizes)
+    res = train(args.task, preset=args.preset, seeds=args.seeds, devices=d, progress=False, plot=False,
+                profile=args.profile and r == args.repeats - 1, **sizes)
     rates.append(res.throughput)
+    compiles.append(res.timings["compile"])
     if curve is None:
       curve = [{k: row[k] for k in ("seed", "iteration", "env_steps", "wall_time") + CURVE_KEYS if k in row}
                for row in res.history]
     print(f"train D={d} repeat {r}: {res.throughput:,.0f} env-steps/s ({res.iterations} iterations, "
           f"compile {res.timings['compile']:.1f} s)", flush=True)
-  return {"config": {k: v for k, v in res.config.to_json().items() if k != "num_timesteps"},
-          "env_steps_per_s": stats(rates), "curve": curve}
+  out = {"config": {k: v for k, v in res.config.to_json().items() if k != "num_timesteps"},
+         "env_steps_per_s": stats(rates), "first_iteration_s": compiles, "curve": curve}
+  if args.profile:  # s per iteration, all seeds: rollout (env step + inference) vs update (SGD incl. all-reduces)
+    out["profile"] = {k.split("/")[1]: v for k, v in res.timings.items() if k.startswith("profile/")}
+    print(f"train D={d} profile: " + ", ".join(f"{k} {v:.3f} s" for k, v in out["profile"].items()), flush=True)
+  return out
 
 
 def eval_runs(args, d: int) -> dict:
@@ -175,6 +188,15 @@ def write(base: str, payload: dict) -> None:
   for r in rows:
     lines.append(f"| {r['devices']} | {r['train']['config']['num_envs']} | {cell(r, 'train')} | "
                  f"{r['eval']['episodes']} | {cell(r, 'eval')} |")
+  prof = [r for r in rows if r["train"].get("profile")]
+  if prof:
+    lines += ["", "One iteration split (s, last repeat, `--profile`): rollout = env steps + inference; update = "
+              "normaliser + SGD epochs with their all-reduces (= iteration − rollout).", "",
+              "| Devices | rollout s | update s | iteration s | update share |", "|---:|---:|---:|---:|---:|"]
+    for r in prof:
+      p = r["train"]["profile"]
+      lines.append(f"| {r['devices']} | {p['rollout']:.3f} | {p['update']:.3f} | {p['iteration']:.3f} | "
+                   f"{p['update'] / p['iteration']:.0%} |")
   lines += ["", "Learning curves (first repeat; deterministic evaluation, mean over seeds):", "",
             "| Devices | Env steps / seed | " + " | ".join(k.split("/")[1] for k in CURVE_KEYS) + " |",
             "|---:|---:|" + "---:|" * len(CURVE_KEYS)]
