@@ -53,6 +53,17 @@ def trace(name: str, robot: str, episodes: int, seed: int):
   return env, [np.asarray(x) for x in jax.jit(jax.vmap(ep))(rngs, which)]
 
 
+def shown_episodes(completed, per_style: int, show: str) -> set:
+  """Episodes printed step by step, one per style: its first, or (``show="failed"``) its first that did not
+  complete (the first if all did). ``completed``: bool[styles × per_style], styles in blocks."""
+  shown = set()
+  for start in range(0, len(completed), per_style):
+    group = np.arange(start, start + per_style)
+    failed = group[~np.asarray(completed)[group]]
+    shown.add(int(group[0]) if show == "first" or not len(failed) else int(failed[0]))
+  return shown
+
+
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("task")
@@ -60,6 +71,8 @@ def main(argv=None) -> int:
   p.add_argument("--episodes", type=int, default=6, help="per style")
   p.add_argument("--every", type=int, default=10, help="control steps between printed rows")
   p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--show", choices=("first", "failed"), default="first",
+                 help="which episode of each style is printed step by step: the first, or the first that fails")
   a = p.parse_args(argv)
   tasks.task_class(a.task)
   robots.robot_class(a.robot)
@@ -68,10 +81,11 @@ def main(argv=None) -> int:
   env, (eef, gap, act, succ, health, tobs) = trace(a.task, a.robot, a.episodes, a.seed)
   np.set_printoptions(precision=3, suppress=True, linewidth=200)
   print(f"{a.task} robot={a.robot} episode_length={env.unwrapped.episode_length} entities={env.entity_names}")
+  shown = shown_episodes(succ.max(axis=1) > 0, a.episodes, a.show)
   for b in range(eef.shape[0]):
     style = tasks.STYLES[b // a.episodes]
     print(f"--- episode {b} {style}: completed {succ[b].max():.0f}, final health {health[b, -1]}")
-    if b % a.episodes == 0:
+    if b in shown:
       for t in range(0, eef.shape[1], a.every):
         print(f"{t:4d} eef {eef[b, t]} gap {gap[b, t]:.3f} a {act[b, t]} success {succ[b, t]:.0f} "
               f"health {health[b, t]} task_obs {tobs[b, t]}")

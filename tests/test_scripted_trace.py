@@ -1,0 +1,15 @@
+"""benchmarks/scripted_trace.py picks the episode it prints step by step."""
+
+import numpy as np
+
+from conftest import load_benchmark
+
+T = load_benchmark("scripted_trace")
+
+
+def test_first_of_each_style_by_default():
+  assert T.shown_episodes(np.array([1, 0, 0, 1, 1, 0], bool), 3, "first") == {0, 3}
+
+
+def test_failed_shows_the_first_failure_of_each_style_or_the_first_if_none_failed():
+  assert T.shown_episodes(np.array([1, 0, 0, 1, 1, 1], bool), 3, "failed") == {1, 3}
