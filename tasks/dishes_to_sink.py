@@ -47,9 +47,14 @@ return than the safe strategy.
 Observation (``full``): [proprio (8); plate pos (3) + lin. vel (3); cup pos (3) +
 lin. vel (3)] = 20.
 
-Robot: designed and tuned for the default floating gripper. The 12 cm plate is
-wider than the Panda hand's 8 cm stroke, so with ``robot="panda"`` the scripted
-policies cannot grasp it (no per-robot scene edit yet).
+Robot: designed and tuned for the default floating gripper. With
+``robot="panda"`` the scripted policies cannot complete, for three reasons. The 12 cm
+plate is wider than the Panda hand's 8 cm stroke. The 8 cm cup leaves the fully open
+fingers no clearance. The cup's hold assumes the gripper's 7 cm from palm to
+fingertips, longer than the Panda's 5.5 cm. In addition, from the default mount the hand
+stalls folded 0.28 m in front of the base, short of the dishes. The Panda needs
+narrower dishes and a higher cup hold (``edit_scene``, as in place_plate and
+shelve_item) and the side mount; none of these exists yet.
 """
 
 from __future__ import annotations
