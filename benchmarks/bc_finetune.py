@@ -60,7 +60,6 @@ from mjx_damage import data as D  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 from mjx_damage.runtime import device_info  # noqa: E402
 from train import bc_actor as BA  # noqa: E402
-from train import curate  # noqa: E402
 from train import evaluate as E  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.record import record  # noqa: E402

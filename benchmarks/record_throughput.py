@@ -98,7 +98,8 @@ def main(argv=None) -> int:
       op = operators.make(env, args.operator)
       scratch = timed_record(env, op, task, args.episodes, args.episodes, 0, os.path.join(tmp, f"{task}_a.hdf5"))
       steady = timed_record(env, op, task, args.steady_episodes, args.chunk, 1, os.path.join(tmp, f"{task}_b.hdf5"))
-      per_chunk = steady["transitions"] / (args.steady_episodes / steady["chunk"])
+      # every chunk runs `chunk` whole episodes (the last one padded), so each is chunk × T transitions of work
+      per_chunk = steady["chunk"] * E.env_episode_length(env)
       rec_tps = per_chunk * (len(steady["chunk_s"]) - 1) / sum(steady["chunk_s"][1:])
       save_tps = steady["transitions"] / steady["save_s"]
       rows.append({"task": task, "episode_length": E.env_episode_length(env), "scratch": scratch,

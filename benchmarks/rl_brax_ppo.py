@@ -189,7 +189,8 @@ def render_md(doc: dict) -> str:
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
         f"| {r['eval_episodes']} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
-  lines += [""] + doc.get("notes", []) if doc.get("notes") else []
+  if doc.get("notes"):
+    lines += ["", *doc["notes"]]
   return "\n".join(lines) + "\n"
 
 
