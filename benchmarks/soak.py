@@ -38,7 +38,9 @@ import json
 import os
 import platform
 import shlex
+import subprocess
 import sys
+import tempfile
 import time
 
 import mjx_damage  # noqa: F401  (package-wide JAX settings before JAX starts)
@@ -51,6 +53,7 @@ import numpy as np
 from brax.envs.wrappers import training as bw
 
 import tasks
+from tasks import robots
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EXTREMES = (1e3, -1e3, float("nan"), float("inf"), float("-inf"))
@@ -148,9 +151,10 @@ def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int |
   return jax.jit(reset), jax.jit(run, donate_argnums=0)
 
 
-def soak_task(name: str, envs: int, steps: int, chunk: int, extreme_frac: float, seed: int = 0) -> dict:
-  """Soak one task: ``steps`` env steps per env (rounded up to whole chunks). Counts as plain ints."""
-  env = tasks.make(name)
+def soak_task(name: str, envs: int, steps: int, chunk: int, extreme_frac: float, seed: int = 0,
+              robot: str = robots.DEFAULT) -> dict:
+  """Soak one task with ``robot``: ``steps`` env steps per env (rounded up to whole chunks). Counts as plain ints."""
+  env = tasks.make(name, robot=robot)
   reset, run = build(env, envs, chunk, extreme_frac)
   t0 = time.perf_counter()
   carry = reset(jax.random.PRNGKey(seed))
@@ -163,7 +167,7 @@ def soak_task(name: str, envs: int, steps: int, chunk: int, extreme_frac: float,
   wall = time.perf_counter() - t0
   lm = env.unwrapped.damage_binding.liquid
   return {
-      "task": name, **counts,
+      "task": name, "robot": robot, **counts,
       "particles": 0 if lm is None else lm.num_particles,
       "envs": envs, "steps_per_env": counts["steps"] // envs, "episode_length": env.unwrapped.episode_length,
       "compile_and_first_chunk_s": round(first, 1), "wall_s": round(wall, 1),
@@ -177,7 +181,7 @@ def failures(row: dict) -> int:
 def report_md(res: dict) -> str:
   lines = [f"# Soak: random and extreme actions through every task ({res['device']})", "",
            f"Command: `{res['command']}`  ", f"Date: {res['date']}; total {res['total_s']} s", "",
-           f"{res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions uniform in [−1, 1] with "
+           f"Robot: {res.get('robot', robots.DEFAULT)}. {res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions uniform in [−1, 1] with "
            f"{100 * res['extreme_frac']:g} % of entries replaced by one of ±1e3, NaN, ±inf. Every (env, step) is "
            "checked on device (benchmarks/soak.py docstring defines the counters).", "",
            "| task | steps | episodes | non-finite | health out of [0, 100] | health increases | particles | "
@@ -188,7 +192,13 @@ def report_md(res: dict) -> str:
                  f"{r['health_increase']} | {r['particles'] or '—'} | "
                  f"{r['particle_violations'] if r['particles'] else '—'} | {r['extreme_injected']:,} | "
                  f"{r['action_sanitised']:,} | {r['sanitise_mismatch']} | {r['wall_s']} |")
-  lines += ["", f"Result: {'PASS (every counter 0)' if res['ok'] else 'FAIL'}"]
+  missing = res.get("missing", [])
+  if missing:
+    lines += ["", f"Not run (the run stopped before them): {', '.join(missing)}"]
+  verdict = ("PASS (every counter 0)" if res["ok"] else
+             "INCOMPLETE (every counter 0 in the tasks run)" if missing and all(failures(r) == 0 for r in res["tasks"])
+             else "FAIL")
+  lines += ["", f"Result: {verdict}"]
   return "\n".join(lines) + "\n"
 
 
@@ -196,7 +206,9 @@ def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                               formatter_class=argparse.ArgumentDefaultsHelpFormatter)
   gpu = jax.default_backend() != "cpu"
-  p.add_argument("--tasks", default=",".join(tasks.names()), help="comma-separated task names")
+  p.add_argument("--tasks", default=None,
+                 help="comma-separated task names (default: every task the robot supports)")
+  p.add_argument("--robot", default=robots.DEFAULT, help=f"one of {', '.join(robots.names())}")
   p.add_argument("--envs", type=int, default=512 if gpu else 8, help="environments per task")
   p.add_argument("--steps", type=int, default=None,
                  help="env steps per task, all envs together (default 1e6 on GPU, 3200 on CPU)")
@@ -204,16 +216,24 @@ def main(argv=None) -> int:
   p.add_argument("--extreme-frac", type=float, default=0.05, help="share of action entries made extreme")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/soak_<platform>.json)")
+  p.add_argument("--workers", type=int, default=1,
+                 help="soak the tasks in this many parallel processes (tasks dealt round-robin; on a GPU each "
+                      "process allocates memory as it needs), then merge their rows into --out")
   p.add_argument("--merge", nargs="+", metavar="FILE.json",
                  help="no soak: merge the task rows of earlier results files (one per task, e.g. run in "
                       "parallel processes) into --out")
   args = p.parse_args(argv)
   if args.merge:
     return merge(args.merge, args.out, p)
-  names = [t for t in args.tasks.split(",") if t]
+  if args.robot not in robots.names():
+    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(robots.names())}")
+  names = ([t for t in tasks.names() if args.robot in tasks.robots_for(t)] if args.tasks is None
+           else [t for t in args.tasks.split(",") if t])
   for t in names:
     if t not in tasks.names():
       p.error(f"--tasks: unknown task {t!r}; valid: {', '.join(tasks.names())}")
+    if args.robot not in tasks.robots_for(t):
+      p.error(f"--tasks: task {t!r} supports {', '.join(tasks.robots_for(t))} only, not --robot {args.robot}")
   steps = args.steps if args.steps is not None else (1_000_000 if gpu else 3200)
   chunk = args.chunk if args.chunk is not None else (250 if gpu else 200)
   for flag, v in (("--envs", args.envs), ("--steps", steps), ("--chunk", chunk)):
@@ -221,29 +241,81 @@ def main(argv=None) -> int:
       p.error(f"{flag}: must be >= 1, got {v}")
   if not 0.0 <= args.extreme_frac <= 1.0:
     p.error(f"--extreme-frac: must be in [0, 1], got {args.extreme_frac}")
+  if args.workers < 1:
+    p.error(f"--workers: must be >= 1, got {args.workers}")
   per_env = -(-steps // args.envs)
   dev = jax.devices()[0]
+  stem = f"soak_{dev.platform}" if args.robot == robots.DEFAULT else f"soak_{args.robot}_{dev.platform}"
+  out = args.out or os.path.join(HERE, "results", stem + ".json")
+  if args.workers > 1:
+    return run_workers(argv if argv is not None else sys.argv[1:], names, args.workers, out, p)
   t0 = time.perf_counter()
   rows = []
+  command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py", *(sys.argv[1:] if argv is None else argv)])
   for name in names:
-    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed)
+    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed, args.robot)
     rows.append(r)
-    print(f"{name}: {r['steps']} steps, {r['episodes']} episodes, failures {failures(r)}, "
+    bad = {k: r[k] for k in COUNTERS if r[k]}
+    print(f"{name}: {r['steps']} steps, {r['episodes']} episodes, failures {failures(r)}{' ' + str(bad) if bad else ''}, "
           f"sanitised {r['action_sanitised']}, {r['wall_s']} s", flush=True)
-  res = {
-      "command": " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py",
-                                                   *(sys.argv[1:] if argv is None else argv)]),
-      "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')}", "host": platform.node(),
-      "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "total_s": round(time.perf_counter() - t0, 1),
-      "envs": args.envs, "steps_per_task": per_env * args.envs, "chunk": chunk, "extreme_frac": args.extreme_frac,
-      "seed": args.seed, "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
-      "tasks": rows, "ok": all(failures(r) == 0 for r in rows),
-  }
-  out = args.out or os.path.join(HERE, "results", f"soak_{dev.platform}.json")
-  io.write_json(out, res)
-  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
+    # written after every task, so a run stopped part-way keeps what finished ("complete" says which)
+    res = {
+        "command": command,
+        "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')}", "host": platform.node(),
+        "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "total_s": round(time.perf_counter() - t0, 1),
+        "envs": args.envs, "steps_per_task": per_env * args.envs, "chunk": chunk, "extreme_frac": args.extreme_frac,
+        "seed": args.seed, "robot": args.robot, "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "tasks": rows, "missing": names[len(rows):], "complete": len(rows) == len(names),
+        "ok": len(rows) == len(names) and all(failures(r) == 0 for r in rows),
+    }
+    io.write_json(out, res)
+    io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
   print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")
   return 0 if res["ok"] else 1
+
+
+def worker_argv(argv: list[str]) -> list[str]:
+  """``argv`` without ``--workers``, ``--tasks`` and ``--out`` (each worker gets its own), in either form."""
+  drop = {"--workers", "--tasks", "--out"}
+  base = []
+  it = iter(argv)
+  for a in it:
+    if a.split("=")[0] in drop:
+      if "=" not in a:
+        next(it, None)
+      continue
+    base.append(a)
+  return base
+
+
+def run_workers(argv: list[str], names: list[str], workers: int, out: str, p) -> int:
+  """Soak ``names`` in ``workers`` child processes (this script with ``--tasks`` and ``--out`` of its share),
+  then merge their files into ``out``; the merged file records this command."""
+  base = worker_argv(argv)
+  env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")
+  t0 = time.perf_counter()
+  shares = [names[i::workers] for i in range(workers) if names[i::workers]]
+  with tempfile.TemporaryDirectory(prefix="soak_") as tmp:
+    paths = [os.path.join(tmp, f"part{i}.json") for i in range(len(shares))]
+    procs = [subprocess.Popen([sys.executable, os.path.abspath(__file__), *base, "--tasks", ",".join(share),
+                               "--out", path], env=env) for share, path in zip(shares, paths)]
+    codes = [q.wait() for q in procs]
+    written = [path for path in paths if os.path.exists(path)]
+    if not written:
+      print(f"soak: no worker wrote results (exit codes {codes})", file=sys.stderr)
+      return 2
+    rc = merge(written, out, p)
+  command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py", *argv])
+  with open(out) as f:
+    res = json.load(f)
+  # total_s: this command's wall time (the workers overlap; their sum is worker_s)
+  done = {t["task"] for t in res["tasks"]}
+  missing = [n for n in names if n not in done]  # a worker stopped or crashed before these
+  res = dict(res, command=command, workers=workers, worker_s=res["total_s"], total_s=round(time.perf_counter() - t0, 1),
+             missing=missing, complete=not missing, ok=res["ok"] and not missing)
+  io.write_json(out, res)
+  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
+  return rc if not missing else max(rc, 1)
 
 
 def merge(paths, out, p) -> int:
@@ -255,7 +327,7 @@ def merge(paths, out, p) -> int:
         runs.append(json.load(f))
     except (OSError, ValueError) as e:
       p.error(f"--merge: cannot read {path!r}: {e}")
-  keys = ("device", "envs", "steps_per_task", "chunk", "extreme_frac", "seed")
+  keys = ("device", "envs", "steps_per_task", "chunk", "extreme_frac", "seed", "robot")
   for r, path in zip(runs[1:], paths[1:]):
     bad = [k for k in keys if r.get(k) != runs[0].get(k)]
     if bad:
@@ -264,9 +336,13 @@ def merge(paths, out, p) -> int:
   names = [t["task"] for t in rows]
   if len(set(names)) != len(names):
     p.error(f"--merge: a task appears twice: {names}")
-  res = dict(runs[0], tasks=rows, ok=all(failures(t) == 0 for t in rows),
+  missing = sorted(t for r in runs for t in r.get("missing", []))
+  res = dict(runs[0], tasks=rows, missing=missing, complete=not missing,
+             ok=not missing and all(failures(t) == 0 for t in rows),
              command="; ".join(r["command"] for r in runs), total_s=round(sum(r["total_s"] for r in runs), 1))
-  out = out or os.path.join(HERE, "results", f"soak_{res['device'].split(':')[0]}.json")
+  robot = res.get("robot", robots.DEFAULT)
+  stem = "soak_" + ("" if robot == robots.DEFAULT else robot + "_") + res["device"].split(":")[0]
+  out = out or os.path.join(HERE, "results", stem + ".json")
   io.write_json(out, res)
   io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
   print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")

@@ -28,6 +28,7 @@ Model (position-based dynamics, per physics substep dt, one environment)::
     p* += pair repulsion (pairs closer than 2r pushed apart, capped at r/4 per substep;
           partners from cell lists of side 2.2 r or every pair, see pair_search)
     repeat `iterations` times: for every collidable geom with φ(p*) < r: p* += (r − φ)·n
+    then for every plane of the world body: p* += max(r − φ, 0)·n  (the floor has the last word)
     v ← (p* − p)/dt;  in contact: tangential v relative to the geom's surface velocity × (1 − friction),
                       approaching normal velocity removed;  ‖v‖ ≤ max_speed
     p ← p*
@@ -113,6 +114,7 @@ class LiquidModel:
   column_body: np.ndarray = struct.field(pytree_node=False)  # i32[G] body of each column
   column_root: np.ndarray = struct.field(pytree_node=False)  # i32[G] root body of each column
   column_link_mask: np.ndarray = struct.field(pytree_node=False)  # bool[G, L] column belongs to tracked link l
+  world_planes: tuple = struct.field(pytree_node=False, default=())  # columns that are planes of the world body
 
   @property
   def num_particles(self) -> int:
@@ -240,6 +242,7 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
       column_body=body,
       column_root=model.body_rootid[body].astype(np.int32),
       column_link_mask=column_link[:, None] == np.arange(binding.num_links)[None, :],
+      world_planes=tuple(int(k) for k in np.flatnonzero((gtype[order] == mujoco.mjtGeom.mjGEOM_PLANE) & (body == 0))),
   )
 
 
@@ -369,8 +372,18 @@ def advance(m, binding, d, ds, dt):
     for _ in range(lm.iterations):  # static: a few projection passes
       phi, n = G.points_to_geoms_planes(lm.groups, d, m, p)  # [P, G], normals as x, y, z planes
       pen = jnp.maximum(r - phi, 0.0)  # [P, G] depth of the particle's sphere in each geom
-      p = p + jnp.stack([jnp.sum(pen * c, axis=1) for c in n], axis=-1)
+      step = jnp.stack([jnp.sum(pen * c, axis=1) for c in n], axis=-1)
+      p = p + step
     phi = phi + pen  # after the last push (exact for the geom pushed along its own normal)
+    # The world's planes have the last word: a particle squeezed between a moving body and the floor
+    # (a glass set down on it) gets opposite pushes that can sum downward, and once below a plane it
+    # is lost from the scene. φ to a plane is linear in p, so its value after the pass is exact.
+    for k in lm.world_planes:
+      nk = jnp.stack([c[:, k] for c in n], axis=-1)  # [P, 3]
+      phi_k = phi[:, k] - pen[:, k] + jnp.sum(step * nk, axis=-1)
+      below = jnp.maximum(r - phi_k, 0.0)
+      p = p + below[:, None] * nk
+      phi = phi.at[:, k].set(phi_k + below)
   v = (p - p0) / dt
   if pairs:
     v = v + _pair_damp(lm, p_pair, take(p_pair), valid, count, v, take(v))

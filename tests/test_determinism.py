@@ -133,3 +133,18 @@ def test_cause_xla_cpu_sums_depend_on_batch_shape():
       same[name, b] = got.tobytes() == ref[:b].tobytes()
   assert not same["sum", 1] and not same["rowsum", 1] and not same["gram", 1]
   assert all(same[k, b] for k in ops for b in (3, 8)) and all(same["cholesky", b] for b in (1, 2))
+
+
+def test_gpu_criteria_allow_only_mjx_derived_leaves_to_differ():
+  """Non-strict (GPU) judging: rerun/chunked may differ only in MJX's recomputed intermediates."""
+  zero = {k: 0.0 for k in _det.TOL}
+
+  def check(leaves, diffs=zero):
+    return {"bitwise": not leaves, "differing_leaves": list(leaves), "max_abs_diff": dict(diffs)}
+
+  checks = {"rerun": check(_det.DERIVED[:2]), "chunked": check([".pipeline_state.qpos"]),
+            "recompiled": check([".obs"], {**zero, "obs": 1e-4}), "half_batch": check([".obs"], {**zero, "obs": 0.5})}
+  _det.judge(checks, _det.TOL, strict=False)
+  assert [checks[k]["ok"] for k in ("rerun", "chunked", "recompiled", "half_batch")] == [True, False, True, False]
+  _det.judge(checks, _det.TOL, strict=True)
+  assert not any(c["ok"] for c in checks.values())

@@ -83,3 +83,17 @@ def test_soak_every_task(name):
   assert r["action_sanitised"] == r["extreme_injected"] > 0
   if name == "pour_water":
     assert r["particles"] > 0
+
+
+def test_worker_argv_drops_only_the_per_worker_flags():
+  argv = ["--robot", "panda", "--workers", "4", "--tasks=a,b", "--envs", "16", "--out", "x.json", "--seed=3"]
+  assert soak.worker_argv(argv) == ["--robot", "panda", "--envs", "16", "--seed=3"]
+
+
+@pytest.mark.parametrize("argv,field", [(["--robot", "ur5"], "--robot"), (["--workers", "0"], "--workers"),
+                                        (["--robot", "gripper", "--tasks", "nope"], "--tasks"),
+                                        (["--robot", "panda", "--tasks", "navigate_and_pick"], "--tasks")])
+def test_soak_cli_names_the_bad_field(argv, field, capsys):
+  with pytest.raises(SystemExit) as e:
+    soak.main(argv)
+  assert e.value.code == 2 and field in capsys.readouterr().err
