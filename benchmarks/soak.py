@@ -62,6 +62,7 @@ import numpy as np
 from brax.envs.wrappers import training as bw
 
 import tasks
+from apps.workers import argv_without
 from tasks import robots
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -285,16 +286,7 @@ def main(argv=None) -> int:
 
 def worker_argv(argv: list[str]) -> list[str]:
   """``argv`` without ``--workers``, ``--tasks`` and ``--out`` (each worker gets its own), in either form."""
-  drop = {"--workers", "--tasks", "--out"}
-  base = []
-  it = iter(argv)
-  for a in it:
-    if a.split("=")[0] in drop:
-      if "=" not in a:
-        next(it, None)
-      continue
-    base.append(a)
-  return base
+  return argv_without(argv, ("--workers", "--tasks", "--out"))
 
 
 def run_workers(argv: list[str], names: list[str], workers: int, out: str, p) -> int:

@@ -27,6 +27,14 @@ sampling, as ``train/``), ``zeros`` or the task's scripted ``safe`` policy.
 
     python benchmarks/step_overhead.py --envs 32768                      # GPU, all variants
     python benchmarks/step_overhead.py --envs 64 --steps 10 --variants task,raw   # CPU smoke
+    python benchmarks/step_overhead.py --tasks add_firewood,...,wipe_counter --variants task,raw \
+        --envs 32768 --precompile-workers 8 [--robot panda]      # the every-task table, one GPU
+
+``--robot`` runs every task with that robot (rows record it). ``--precompile-workers N``
+compiles every (task, variant) program first in N parallel child processes, which fill JAX's
+persistent compilation cache; this process then times them one after another, loading each
+from the cache. Compiles dominate a many-task run (20–60 s each, one CPU thread each), and
+timings must not share the device, so this splits the two.
 
 Writes ``benchmarks/results/step_overhead_<device>.{json,md}`` (``--out-dir``) with the command.
 A run merges into an existing file of the same device, batch size, steps, policy and
@@ -103,14 +111,16 @@ def applicable(task, variant: str) -> bool:
   return True
 
 
-def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy_kind: str, clock=time.perf_counter) -> dict:
+def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy_kind: str, clock=time.perf_counter,
+            robot: str | None = None, compile_only: bool = False) -> dict | None:
+  """One (task, variant) row; ``compile_only``: compile (filling the persistent cache) and return None."""
   import jax
   import jax.numpy as jnp
 
   import tasks
   from mjx_damage import physics
 
-  env = tasks.make(name)
+  env = tasks.make(name) if robot is None else tasks.make(name, robot=robot)
   task = env.unwrapped
   override = _physics_override(task, variant)
   if override is not None:
@@ -150,6 +160,9 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   t0 = time.perf_counter()
   compiled = jax.jit(run, donate_argnums=0).lower(carry).compile()
   compile_s = time.perf_counter() - t0
+  if compile_only:
+    print(f"{name:12s} {variant:15s} compiled in {compile_s:.0f} s", flush=True)
+    return None
   carry = jax.block_until_ready(compiled(carry))  # warm-up
   best = float("inf")
   for _ in range(repeats):
@@ -158,7 +171,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
     best = min(best, clock() - t0)
   d = carry[0] if variant.startswith("raw") else carry[0].pipeline_state
   row = {
-      "task": name, "variant": variant, "envs": envs, "steps": steps,
+      "task": name, "robot": robot or tasks.robots.DEFAULT, "variant": variant, "envs": envs, "steps": steps,
       "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s,
       "finite": bool(jnp.all(jnp.isfinite(d.qpos))),
   }
@@ -166,12 +179,40 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   return row
 
 
+def precompile(argv: list[str], pairs: list[tuple[str, str]], workers: int) -> None:
+  """Compiles ``pairs`` in ``workers`` child processes (this script, ``--compile-only``, a share each).
+
+  The children write JAX's persistent compilation cache; the timing process then loads each
+  program from it instead of compiling it, so compiles run in parallel and timings do not share
+  the device with anything. On a GPU the children allocate memory as they need it."""
+  import subprocess
+
+  from apps.workers import argv_without
+  from mjx_damage import runtime
+
+  if runtime.cache_dir() is None:
+    raise SystemExit("--precompile-workers: the persistent compilation cache is off (MJX_DAMAGE_CACHE_DIR); "
+                     "nothing would carry the compiled programs over")
+  base = argv_without(argv, ("--precompile-workers", "--tasks", "--variants"))
+  env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")
+  shares = [pairs[i::workers] for i in range(workers) if pairs[i::workers]]
+  procs = []
+  for share in shares:  # one child per (task, variant) share: each pair is its own --tasks/--variants call
+    cmds = [[sys.executable, os.path.abspath(__file__), *base, "--tasks", n, "--variants", v, "--compile-only"]
+            for n, v in share]
+    procs.append(subprocess.Popen("; ".join(shlex.join(c) for c in cmds), shell=True, env=env))
+  codes = [q.wait() for q in procs]
+  if any(codes):
+    print(f"precompile: some workers failed (exit codes {codes}); those programs compile while timing", flush=True)
+
+
 def summarise(rows: list[dict]) -> list[dict]:
   """Adds ``ratio_to_raw`` and ``share_of_task_step`` to each row (per task)."""
-  rows = sorted(rows, key=lambda r: (r["task"], VARIANTS.index(r["variant"])))
-  by = {(r["task"], r["variant"]): r for r in rows}
+  robot = lambda r: r.get("robot", "gripper")  # noqa: E731  (rows written before --robot: the gripper)
+  rows = sorted(rows, key=lambda r: (r["task"], robot(r), VARIANTS.index(r["variant"])))
+  by = {(r["task"], robot(r), r["variant"]): r for r in rows}
   for r in rows:
-    raw, task = by.get((r["task"], "raw")), by.get((r["task"], "task"))
+    raw, task = by.get((r["task"], robot(r), "raw")), by.get((r["task"], robot(r), "task"))
     r["ratio_to_raw"] = r["env_steps_per_s"] / raw["env_steps_per_s"] if raw else None
     r["share_of_task_step"] = 1.0 - r["wall_s"] / task["wall_s"] if task and r["variant"] != "task" else None
   return rows
@@ -186,13 +227,14 @@ def markdown(record: dict) -> str:
       "ratio = env-steps/s over `raw` (n_substeps × mjx.step, same model and batch); share = time the variant "
       "removes from the task step (1 − t_variant / t_task).",
       "",
-      "| task | variant | env-steps/s | ratio to raw | share of task step | compile s |",
-      "|---|---|---:|---:|---:|---:|",
+      "| task | robot | variant | env-steps/s | ratio to raw | share of task step | compile s |",
+      "|---|---|---|---:|---:|---:|---:|",
   ]
   for r in record["results"]:
     ratio = "" if r["ratio_to_raw"] is None else f"{r['ratio_to_raw']:.3f}"
     share = "" if r["share_of_task_step"] is None else f"{100 * r['share_of_task_step']:.1f} %"
-    lines.append(f"| {r['task']} | {r['variant']} | {r['env_steps_per_s']:,.0f} | {ratio} | {share} | {r['compile_s']:.0f} |")
+    lines.append(f"| {r['task']} | {r.get('robot', 'gripper')} | {r['variant']} | {r['env_steps_per_s']:,.0f} | {ratio} | "
+                 f"{share} | {r['compile_s']:.0f} |")
   return "\n".join(lines) + "\n"
 
 
@@ -207,8 +249,16 @@ def main(argv=None) -> int:
   p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                  help="cpu: process CPU seconds (all threads) — steadier than wall time on a shared, loaded CPU; "
                       "use wall on a GPU")
+  p.add_argument("--robot", default=None, help="robot of every task (default: each task's default, the gripper)")
+  p.add_argument("--precompile-workers", type=int, default=0,
+                 help="compile every (task, variant) first in this many parallel processes, which fill JAX's "
+                      "persistent cache; then time them one after another in this process (its compiles hit the "
+                      "cache, so compile s is the cache load). 0: compile each just before timing it")
+  p.add_argument("--compile-only", action="store_true", help=argparse.SUPPRESS)  # a precompile worker
   p.add_argument("--out-dir", default=os.path.join(HERE, "results"))
   a = p.parse_args(argv)
+  if a.precompile_workers < 0:
+    p.error(f"--precompile-workers: must be >= 0, got {a.precompile_workers}")
   for k in ("envs", "steps", "repeats"):
     if getattr(a, k) < 1:
       p.error(f"--{k}: must be >= 1")
@@ -222,18 +272,27 @@ def main(argv=None) -> int:
   for n in names:
     if n not in tasks.names():
       p.error(f"--tasks: unknown {n!r}; valid: {', '.join(tasks.names())}")
+  if a.robot is not None:
+    if a.robot not in tasks.robots.names():
+      p.error(f"--robot: unknown {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+    for n in names:
+      if a.robot not in tasks.robots_for(n):
+        p.error(f"--tasks: {n!r} supports {', '.join(tasks.robots_for(n))} only, not --robot {a.robot}")
   os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(HERE, "..", ".jax_cache"))
   import jax
 
   from mjx_damage import io
 
-  rows = []
-  for n in names:
-    probe = tasks.make(n).unwrapped
-    for v in variants:
-      if applicable(probe, v):
-        rows.append(measure(n, v, a.envs, a.steps, a.repeats, a.policy,
-                            time.perf_counter if a.clock == "wall" else time.process_time))
+  make = (lambda n: tasks.make(n)) if a.robot is None else (lambda n: tasks.make(n, robot=a.robot))  # noqa: E731
+  pairs = [(n, v) for n in names for v in variants if applicable(make(n).unwrapped, v)]
+  clock = time.perf_counter if a.clock == "wall" else time.process_time
+  if a.compile_only:
+    for n, v in pairs:
+      measure(n, v, a.envs, a.steps, a.repeats, a.policy, clock, a.robot, compile_only=True)
+    return 0
+  if a.precompile_workers:
+    precompile(argv if argv is not None else sys.argv[1:], pairs, a.precompile_workers)
+  rows = [measure(n, v, a.envs, a.steps, a.repeats, a.policy, clock, a.robot) for n, v in pairs]
   device = jax.devices()[0]
   record = {
       "benchmark": "step_overhead",
@@ -256,8 +315,9 @@ def main(argv=None) -> int:
     with open(stem + ".json") as f:
       old = json.load(f)
     if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy", "clock")):
-      new = {(r["task"], r["variant"]) for r in rows}
-      kept = [r for r in old["results"] if (r["task"], r["variant"]) not in new]
+      key = lambda r: (r["task"], r.get("robot", "gripper"), r["variant"])  # noqa: E731
+      new = {key(r) for r in rows}
+      kept = [r for r in old["results"] if key(r) not in new]
       record["results"] = summarise(kept + rows)
       record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
   io.write_json(stem + ".json", record)
