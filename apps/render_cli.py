@@ -1,7 +1,10 @@
 """``mjx-damage render``: a task's rollout as a video, damaged links tinted, health bars (:mod:`mjx_damage.render`).
 
-    mjx-damage render --task place_plate --policy scripted:unsafe --out rollout.mp4 [--plots DIR]
+    mjx-damage render --task place_plate --policy scripted:unsafe --out rollout.mp4 [--plots DIR] \
+        [--backend mjx|native]
 
+``--backend native`` renders the same episode with its physics stepped by native
+MuJoCo (:func:`apps.resolve.on_backend`; scenes without heat sources or liquid).
 Without ``--out`` the video goes to a new ``runs/render-<task>-<time>/rollout.mp4``; an
 existing video (or ``--plots`` folder) is refused unless ``--overwrite`` is given.
 """
@@ -28,6 +31,7 @@ def build_parser() -> Parser:
       prog="mjx-damage render",
       description="Render a rollout: damaged links tinted red, health bars for every tracked entity.")
   R.add_task_policy_arguments(ap)
+  R.add_backend_argument(ap, "the rollout the frames show is stepped by it")
   ap.add_argument("--out", default=None,
                   help="output video, .mp4 or .gif (default: runs/render-<task>-<time>/rollout.mp4)")
   ap.add_argument("--overwrite", action="store_true", help="replace an existing --out video / --plots folder")
@@ -51,6 +55,7 @@ def main(argv=None) -> int:
   args = ap.parse_args(argv)
   try:  # everything the user gave is checked before a task is built or compiled
     R.check_task(args.task)
+    R.check_backend(args.backend)
     kind, _ = R.parse_policy_spec(args.policy)
     if args.out is not None:
       video.check_out(args.out)
@@ -71,6 +76,7 @@ def main(argv=None) -> int:
     task_kwargs = R.checkpoint_task_kwargs(args.policy, args.task) if kind == "checkpoint" else {}
     env = R.make_task(args.task, **task_kwargs)
     policy = R.make_policy(args.policy, env)
+    env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env
     steps = args.steps or R.episode_length_of(env, args.task)
     if args.camera not in (None, "free"):
       camera_of(mj_model_of(env), None, args.camera, [])
@@ -86,7 +92,8 @@ def main(argv=None) -> int:
 
   platform = jax.default_backend()
   print(f"render: task {args.task}, policy {args.policy}, {args.num_envs} env(s) x {steps} steps, "
-        f"{args.width}x{args.height}, seed {args.seed}, device {platform}; output {out}", flush=True)
+        f"{args.width}x{args.height}, seed {args.seed}, backend {args.backend}, device {platform}; output {out}",
+        flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
   with heartbeat("render"):

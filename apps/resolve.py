@@ -70,11 +70,12 @@ def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
   return tasks.native.wrap(env, num_envs, nthread=nthread)
 
 
-def add_backend_argument(ap) -> None:
-  """``--backend mjx|native`` as every command spells it."""
+def add_backend_argument(ap, scope: str = "") -> None:
+  """``--backend mjx|native`` as every command spells it; ``scope`` adds what the choice applies to
+  (bench: only its task throughput), so the one help text says where it does not."""
   ap.add_argument("--backend", default="mjx",
                   help="physics: mjx (compiled MJX-JAX, batched on any device) or native (MuJoCo on C threads, "
-                       "CPU; scenes without heat sources or liquid)")
+                       "CPU; scenes without heat sources or liquid)" + (f"; {scope}" if scope else ""))
 
 
 def episode_length_of(env, task: Optional[str] = None) -> int:
@@ -155,3 +156,4 @@ def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
   if meta.get("task") not in (None, task):
     raise ValueError(f"policy: checkpoint {path!r} was trained on task {meta['task']!r}, not {task!r}")
   return dict(meta.get("task_kwargs") or {})
+

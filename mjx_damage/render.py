@@ -61,7 +61,8 @@ import numpy as np
 from mjx_damage.gl import ensure_gl, gl_backend  # noqa: F401
 from mjx_damage.overlay import (TINT_RGB, bar_layout, draw_health_bars, health_bar_boxes, health_color,  # noqa: F401
                                 tinted_rgba)
-from mjx_damage.trajectory import MODELS, Trajectory, binding_of, positive_int, mj_model_of, rollout  # noqa: F401
+from mjx_damage.trajectory import (MODELS, Trajectory, base_env, binding_of, positive_int, mj_model_of,  # noqa: F401
+                                   rollout)
 from mjx_damage.video import OUTPUT_FORMATS, check_out, write_video  # noqa: F401
 
 
@@ -288,7 +289,8 @@ def render_rollout(env, policy: Callable, *, steps: int, seed: int = 0, out: Opt
 
   Args:
     env: a damage-tracked env (``tasks.make(...)``, or any ``DamageWrapper`` env
-      whose scene has an ``mj_model``).
+      whose scene has an ``mj_model``), or a :class:`~mjx_damage.native_batch.NativeBatchEnv`
+      of ``num_envs`` of them (the same episode, physics stepped by native MuJoCo).
     policy: ``policy(state, rng) -> action`` for one env (jittable).
     steps: control steps; frames = steps + 1 (the first shows the reset state).
     seed: PRNG seed of resets and actions.
@@ -312,7 +314,7 @@ def render_rollout(env, policy: Callable, *, steps: int, seed: int = 0, out: Opt
     check_out(out)
   binding_of(env)
   mj_model = mj_model_of(env)
-  fps = float(fps) if fps is not None else 1.0 / float(env.dt)
+  fps = float(fps) if fps is not None else 1.0 / float(base_env(env).dt)
   if not 0 < fps <= 1000:
     raise ValueError(f"fps: must be in (0, 1000], got {fps!r}")
   ensure_gl()  # fail on a missing GL library before spending time compiling

@@ -4,7 +4,9 @@
 time (so the step count is not baked into the program and any length reuses
 one compilation) and brings back, after each step, only what a frame and the
 plots read: positions, health, loads, cost (:class:`Trajectory`). Works on any
-:class:`~mjx_damage.wrapper.DamageWrapper` env; knows no task.
+:class:`~mjx_damage.wrapper.DamageWrapper` env; knows no task. Given a
+:class:`~mjx_damage.native_batch.NativeBatchEnv` it records the same episode with
+the physics stepped by native MuJoCo (one native call and two jitted calls per step).
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from typing import Optional
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from mjx_damage.native_batch import NativeBatchEnv
 
 MODELS = ("mechanical", "thermal", "fluid")  # order of Trajectory.damage's last axis
 
@@ -125,6 +129,8 @@ class _Programs:
         return policies[0](state, rng)
       return jax.lax.switch(b % len(policies), policies, state, rng)
 
+    self.policy = policy  # one env's action, shared with _NativePrograms
+
     def reset_one(reset_key):
       state = env.reset(reset_key)
       z = jnp.zeros((), jnp.float32)
@@ -141,6 +147,39 @@ class _Programs:
     self.step = jax.jit(jax.vmap(step_one, in_axes=(0, 0, 0, 0, None)))
 
 
+class _NativePrograms:
+  """:class:`_Programs` for a :class:`NativeBatchEnv`: the same episode, native physics in between.
+
+  ``reset`` is the MJX one (the backend resets through MJX as well). A step is
+  ``decide`` (policy + the env's controls, jitted), the native ``simulate`` and
+  ``advance`` (the env's step finished around the native result, frozen where
+  done, recorded; jitted), so keys, freezing and records match :class:`_Programs`.
+  """
+
+  def __init__(self, env: NativeBatchEnv, policies: tuple, num_envs: int):
+    mjx = _Programs(env.env, policies, num_envs)
+    self.reset, self.env = mjx.reset, env
+
+    def decide(state, act_key, b, t):
+      action = jax.vmap(lambda s, k, i: mjx.policy(s, jax.random.fold_in(k, t), i))(state, act_key, b)
+      return action, env.controls_fn(state, action)
+
+    def advance(state, done, action, fields, sensordata):
+      nxt = env.finish_fn(state, action, fields, sensordata)
+      keep = lambda new, old: jnp.where(jnp.reshape(done > 0, done.shape + (1,) * (new.ndim - 1)), old, new)
+      nxt = jax.tree.map(keep, nxt, state)
+      rec = jax.vmap(_record)(nxt, done)
+      return nxt, rec["done"], rec
+
+    self.decide = jax.jit(decide)
+    self.advance = jax.jit(advance)
+
+  def step(self, state, act_keys, done, index, t):
+    action, ctrl = self.decide(state, act_keys, index, t)
+    fields, sensordata = self.env.simulate(state, ctrl)
+    return self.advance(state, done, action, fields, sensordata)
+
+
 _PROGRAMS: "collections.OrderedDict" = collections.OrderedDict()
 _MAX_PROGRAMS = 4  # a few (env, policy) pairs stay compiled, e.g. safe and unsafe of one task
 
@@ -151,7 +190,7 @@ def _programs(env, policies: tuple, num_envs) -> _Programs:
   if key in _PROGRAMS:
     _PROGRAMS.move_to_end(key)
   else:
-    _PROGRAMS[key] = _Programs(env, policies, num_envs)
+    _PROGRAMS[key] = (_NativePrograms if isinstance(env, NativeBatchEnv) else _Programs)(env, policies, num_envs)
     while len(_PROGRAMS) > _MAX_PROGRAMS:
       _PROGRAMS.popitem(last=False)
   return _PROGRAMS[key]
@@ -163,7 +202,13 @@ def positive_int(name, v):
   return int(v)
 
 
+def base_env(env):
+  """The damage-wrapped env itself: ``env``, or the env a :class:`NativeBatchEnv` steps natively."""
+  return env.env if isinstance(env, NativeBatchEnv) else env
+
+
 def binding_of(env):
+  env = base_env(env)  # a native batch records the binding of the env it wraps
   # DamageWrapper's binding (brax wrappers around it forward the attribute); a bare
   # DamageEnv tracks damage but lacks the health/cost summaries that frames and plots read.
   b = getattr(env, "binding", None)
@@ -189,7 +234,8 @@ def rollout(env, policy, *, steps: int, seed: int = 0, num_envs: int = 1,
             same_reset: bool = False) -> Trajectory:
   """Run ``num_envs`` episodes of ``steps`` control steps through one compiled step; record them.
 
-  ``env``: a :class:`~mjx_damage.wrapper.DamageWrapper`-wrapped env (e.g. ``tasks.make``);
+  ``env``: a :class:`~mjx_damage.wrapper.DamageWrapper`-wrapped env (e.g. ``tasks.make``),
+  or a :class:`NativeBatchEnv` of ``num_envs`` of them (the same episodes, native physics);
   ``policy(state, rng) -> action`` for one env, or a sequence of such policies:
   env b then runs ``policy[b % len(policy)]``, all in one compiled program.
   Env b's reset and action keys come from ``split(PRNGKey(seed), num_envs)[b]``,
@@ -204,6 +250,8 @@ def rollout(env, policy, *, steps: int, seed: int = 0, num_envs: int = 1,
     raise ValueError(f"policy: must be a callable policy(state, rng) -> action or a non-empty sequence of them, "
                      f"got {policy!r}")
   binding = binding_of(env)
+  if isinstance(env, NativeBatchEnv) and env.num_envs != num_envs:
+    raise ValueError(f"num_envs: the native batch steps {env.num_envs} environments, got num_envs={num_envs}")
   prog = _programs(env, policies, num_envs)
   keys = jax.vmap(jax.random.split)(jax.random.split(jax.random.PRNGKey(int(seed)), num_envs))
   reset_keys, act_keys = keys[:, 0], keys[:, 1]
@@ -233,5 +281,5 @@ def rollout(env, policy, *, steps: int, seed: int = 0, num_envs: int = 1,
       mech_threshold=np.asarray(params.mech_threshold),
       entity_names=tuple(binding.entity_names), link_names=tuple(binding.link_names),
       link_entity=np.asarray(binding.link_entity), geom_link=np.asarray(binding.geom_link),
-      dt=float(env.dt),
+      dt=float(base_env(env).dt),
   )

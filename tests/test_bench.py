@@ -186,6 +186,7 @@ def test_bench_end_to_end(tmp_path):
                      "--task", "", "--out", str(out)]) == 0
   res = json.loads(out.read_text())
   assert res["summary"]["damage_on_off_ratio_K2_2envs"] > 0
+  assert {r["backend"] for r in res["vs_envs"] + res["vs_entities"]} == {"mjx"} and res["task_backend"] == "mjx"
   assert res["summary"]["tracked_2_over_1_in_2_box_scene_damage_on_2envs"] > 0
   assert res["summary"]["entities_2_over_1_mounted_throughput_damage_on_2envs"] > 0
   assert (tmp_path / "b.png").exists()
@@ -206,3 +207,46 @@ def test_warp_scaling_plan_and_report(capsys):
   assert s == {"jax-cg_sweep_K4_free_over_K1": pytest.approx(0.1), "warp-cg_sweep_K4_1free_over_K1": pytest.approx(0.75)}
   md = W.report_md({"device": "d", "command": "c", "date": "t", "versions": {}, "envs": 2, "rows": rows})
   assert "| warp-cg | sweep | 4 | 1 | 8 | 150 | 75.0% |" in md
+
+
+# --- --backend: the task throughput on either backend ------------------------------------------
+@pytest.mark.parametrize("argv, message", [
+    (["--backend", "foo"], "backend: unknown backend 'foo'"),
+    (["--backend", "native", "--task", "pour_water"], "backend: native has no temperature or liquid model"),
+    (["--backend", "native", "--task", "add_firewood"], "(this scene has heat sources)"),
+    (["--backend", "native", "--task", ""], "backend: native times the --task throughput only"),
+])
+def test_bench_cli_rejects_bad_backend(argv, message, tmp_path, capsys, monkeypatch):
+  """Refused while the arguments are checked: nothing measured, nothing written."""
+  monkeypatch.setattr(bench.cli, "run_benchmark", lambda args: pytest.fail("got past argument checking"))
+  with pytest.raises(SystemExit) as e:
+    bench.main(argv + ["--out", str(tmp_path / "b.json")])
+  assert e.value.code == 2
+  assert message in capsys.readouterr().err
+  assert not list(tmp_path.iterdir())
+
+
+def test_task_throughput_on_native_backend():
+  row = bench.measure_task("place_plate", 2, 0.05, 2, backend="native")
+  assert row["backend"] == "native" and row["task"] == "place_plate" and row["envs"] == 2
+  assert row["steps"] >= 2 and row["env_steps_per_s"] > 0 and row["nthread"] >= 1
+  assert row["physics_steps_per_s"] == pytest.approx(row["env_steps_per_s"] * row["n_substeps"])
+
+
+def test_bench_cli_records_native_task_backend(tmp_path, monkeypatch):
+  """--backend native: the task row is timed natively and says so; the K-box points stay MJX (stubbed out
+  here, so no MJX program compiles: each is recorded as skipped)."""
+  def no_mjx(*a, **k):
+    raise RuntimeError("not measured in this test")
+
+  monkeypatch.setattr(bench.cli, "measure_pair", no_mjx)
+  out = tmp_path / "b.json"
+  assert bench.main(["--backend", "native", "--task", "place_plate", "--task-envs", "2", "--target-s", "0.05",
+                     "--max-steps", "2", "--envs", "1", "--entities", "1", "--tracked", "", "--mounted", "",
+                     "--k", "1", "--entity-envs", "1", "--ratio-envs", "1", "--ref-envs", "1", "--ref-steps", "1",
+                     "--ref-max-s", "1", "--out", str(out)]) == 0
+  res = json.loads(out.read_text())
+  assert res["task_backend"] == "native"
+  assert res["task"]["backend"] == "native" and res["task"]["env_steps_per_s"] > 0
+  assert "(native backend, 2 envs" in (tmp_path / "b.md").read_text()
+  assert "--backend native" in res["command"]

@@ -14,7 +14,13 @@ steps) of ``jit(fori_loop(vmap(step)))`` on the K-box table scene
   (:mod:`mjx_damage.reference`: native MuJoCo, per-entity Python evaluators),
   native MuJoCo without damage, and multi-threaded ``mujoco.rollout``, in the
   same run, for the speed-up ratio;
-* physics steps/s of ``tasks.make("place_plate")`` when the task registry has it.
+* physics steps/s of ``tasks.make("place_plate")`` when the task registry has it,
+  on ``--backend mjx`` (default) or ``native`` (MuJoCo on C threads, CPU).
+
+``--backend`` applies to the task throughput only: the K-box curves time
+``mjx.step`` itself and are MJX by definition (native MuJoCo on the same scene is
+already in every run, as the reference rows), so they ignore it; every row records
+its ``backend``.
 
 Measurements: :mod:`apps.bench.measure`; files written: :mod:`apps.bench.report`.
 Output: a JSON file, a markdown report and a PNG with the curves. ``benchmarks/throughput.py``
@@ -33,6 +39,7 @@ import jax
 import mujoco
 
 import tasks
+from apps import resolve as R
 from apps.bench.measure import batched_initial_state, measure_pair, measure_task
 from apps.bench.report import save, summarize
 from mjx_damage import outputs, reference
@@ -81,6 +88,7 @@ def run_benchmark(args) -> dict:
       "scene": "tasks.bench_table: K free boxes (tracked, 'default' params) on a table plane,"
       " a sphere pusher on slide joints; boxes collide with table and pusher, never with each other;"
       " in the vs_mounted scenes box 0 is free and boxes 1..K-1 are mounted (no joint)",
+      "task_backend": args.backend,  # the K-box rows are MJX whatever it is (each row names its backend)
       "n_substeps": args.substeps,
       "timestep_s": 0.004,
       "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache and
@@ -178,13 +186,14 @@ def run_benchmark(args) -> dict:
 
   if args.task and budget.left() > 0:
     if args.task in tasks.names():
-      print(f"  task {args.task} x {args.task_envs} envs ...", flush=True)
+      print(f"  task {args.task} x {args.task_envs} envs, backend {args.backend} ...", flush=True)
       try:
-        result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps)
+        result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps, args.backend)
       except Exception as e:  # keep the rest of the run
-        result["skipped"].append({"task": args.task, "why": f"{type(e).__name__}: {str(e)[:300]}"})
+        result["skipped"].append({"task": args.task, "backend": args.backend,
+                                  "why": f"{type(e).__name__}: {str(e)[:300]}"})
     else:
-      result["skipped"].append({"task": args.task, "why": "not in tasks.names()"})
+      result["skipped"].append({"task": args.task, "backend": args.backend, "why": "not in tasks.names()"})
 
   for item in rest:
     point(*item)
@@ -216,7 +225,11 @@ def build_parser() -> Parser:
   ap.add_argument("--ref-steps", type=int, default=25, help="env steps per reference environment")
   ap.add_argument("--ref-max-s", type=float, default=20.0, help="stop the reference after about this long")
   ap.add_argument("--task", default="place_plate", help="registry task to time ('' to skip)")
-  ap.add_argument("--task-envs", type=int, default=None, help="batch for the task (CPU 256, GPU 32768)")
+  ap.add_argument("--task-envs", type=int, default=None,
+                  help="batch for the task (CPU or --backend native 256, GPU 32768)")
+  R.add_backend_argument(ap, "here it picks the backend of the --task throughput only: the K-box curves are "
+                             "MJX-only (they time mjx.step itself; native MuJoCo on that scene is in the reference "
+                             "rows of every run)")
   ap.add_argument("--budget-s", type=float, default=540.0, help="stop starting measurements after this long")
   ap.add_argument("--note", dest="notes", action="append", default=[], help="free text stored in the JSON")
   ap.add_argument("--out", default=None, help="JSON path (the .md and .png go beside it) "
@@ -234,8 +247,10 @@ def main(argv=None) -> int:
   args.envs = args.envs or ",".join(map(str, GPU_ENVS if gpu else CPU_ENVS))
   args.entity_envs = args.entity_envs or (8192 if gpu else 1024)
   args.ratio_envs = args.ratio_envs or (8192 if gpu else 1024)
-  args.task_envs = args.task_envs or (32768 if gpu else 256)
   try:
+    R.check_backend(args.backend)
+    native = args.backend == "native"  # native steps on CPU threads whatever the device: the CPU batch
+    args.task_envs = args.task_envs or (32768 if gpu and not native else 256)
     envs = _parse_ints("--envs", args.envs)
     _parse_ints("--entities", args.entities)
     if args.mounted:
@@ -253,6 +268,10 @@ def main(argv=None) -> int:
       raise ValueError(f"--{bad.replace('_', '-')}: must be a number of seconds > 0, got {getattr(args, bad)}")
     if args.task and args.task not in tasks.names():
       raise ValueError(f"--task: unknown task {args.task!r} (valid: {', '.join(tasks.names())}, or '' to skip)")
+    if native and not args.task:
+      raise ValueError("backend: native times the --task throughput only, and --task is '' (nothing to time)")
+    if native:  # a scene the native backend refuses (heat sources, liquid) fails here, before anything compiles
+      R.on_backend(R.make_task(args.task), args.backend, 1)
     if args.out is not None:
       base = os.path.splitext(args.out)[0]
       outputs.check_new([args.out, base + ".md", base + ".png"], "--out", args.overwrite)
@@ -262,7 +281,8 @@ def main(argv=None) -> int:
   except ValueError as e:
     ap.error(str(e))
   args.out = args.out or os.path.join(outputs.run_dir("bench"), "bench.json")
-  print(f"bench: K={args.k} boxes, envs {args.envs}, entities {args.entities}, task {args.task or '-'}, "
+  print(f"bench: K={args.k} boxes, envs {args.envs}, entities {args.entities}, "
+        f"task {args.task + ' (backend ' + args.backend + ')' if args.task else '-'}, "
         f"budget {args.budget_s:g} s, device {jax.devices()[0].device_kind} x {jax.device_count()}; "
         f"outputs {args.out} (+ .md, .png)", flush=True)
   print("compiling each configuration as it comes, about 10-60 s each the first time (seconds once cached) ...",

@@ -1,5 +1,8 @@
 """Timed measurements of the throughput harness: damage on/off pairs on the K-box table, a registry task.
 
+The K-box pairs time ``mjx.step`` itself (MJX only); a registry task is timed on
+either backend (``measure_task(..., backend="native")``: :func:`apps.resolve.on_backend`).
+
 Each measurement records its first-compile time and the process's peak memory
 so far (CPU: ``ru_maxrss``; GPU: ``peak_bytes_in_use`` — both high-water marks).
 """
@@ -16,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-import tasks
+from apps import resolve as R
 from mjx_damage import physics
 from tasks.bench_table import pusher_ctrl
 
@@ -109,6 +112,7 @@ def measure_pair(env, envs: int, target_s: float, max_steps: int, repeats: int =
     r = runs[damage]
     secs = min(r["times"])
     row = {
+        "backend": "mjx",  # these pairs time mjx.step itself, whatever --backend says
         "envs": envs,
         "entities": env.tracked,
         "boxes": env.k,
@@ -132,9 +136,19 @@ def measure_pair(env, envs: int, target_s: float, max_steps: int, repeats: int =
   return rows[0], rows[1]
 
 
-def measure_task(name: str, envs: int, target_s: float, max_steps: int) -> dict:
-  """Physics steps/s of a registry task's ``step`` (damage on, zero action), vmapped."""
-  env = tasks.make(name)
+def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend: str = "mjx") -> dict:
+  """Physics steps/s of a registry task's ``step`` (damage on, zero action) on ``backend``.
+
+  ``mjx``: ``vmap(env.step)`` in a compiled ``fori_loop``. ``native``: the task's
+  :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``envs`` stepped from Python
+  (one native call and two jitted calls per step, as evaluation runs it); its
+  jitted halves compile in the first step, so there ``compile_s`` is that first
+  step's time. The row records ``backend``. Raises ValueError for a scene the
+  native backend refuses (heat sources, liquid).
+  """
+  env = R.on_backend(R.make_task(name), backend, envs)
+  if backend == "native":
+    return _measure_native_task(name, env, envs, target_s, max_steps)
   n_sub = getattr(env, "n_substeps", None) or getattr(env.unwrapped, "n_substeps", 1)
   state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), envs))
   act = jnp.zeros((envs, env.action_size))
@@ -153,8 +167,32 @@ def measure_task(name: str, envs: int, target_s: float, max_steps: int) -> dict:
   t0 = time.perf_counter()
   state = jax.block_until_ready(compiled(state, jnp.int32(steps)))
   secs = time.perf_counter() - t0
+  return _task_row(name, "mjx", envs, n_sub, steps, secs, compile_s)
+
+
+def _measure_native_task(name: str, nenv, envs: int, target_s: float, max_steps: int) -> dict:
+  """:func:`measure_task` on a NativeBatchEnv: the same zero-action steps, timed around a Python loop."""
+  state = nenv.reset(jax.random.split(jax.random.PRNGKey(0), envs))
+  act = jnp.zeros((envs, nenv.action_size))
+  t0 = time.perf_counter()
+  state = jax.block_until_ready(nenv.step(state, act))  # compiles the jitted halves
+  compile_s = time.perf_counter() - t0
+  t0 = time.perf_counter()
+  state = jax.block_until_ready(nenv.step(state, act))
+  first_s = time.perf_counter() - t0
+  steps = int(min(max_steps, max(2, math.ceil(target_s / max(first_s, 1e-6)))))
+  t0 = time.perf_counter()
+  for _ in range(steps):
+    state = nenv.step(state, act)
+  jax.block_until_ready(state)
+  secs = time.perf_counter() - t0
+  return dict(_task_row(name, "native", envs, nenv.n_substeps, steps, secs, compile_s), nthread=nenv.nthread)
+
+
+def _task_row(name, backend, envs, n_sub, steps, secs, compile_s) -> dict:
   out = {
       "task": name,
+      "backend": backend,
       "envs": envs,
       "n_substeps": int(n_sub),
       "steps": steps,
