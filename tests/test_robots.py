@@ -217,6 +217,16 @@ def test_panda_task_adaptations():
   assert tasks.make("open_single_door").unwrapped.grip_dz == OD.GRIP_DZ
   assert tasks.make("open_single_door", robot="panda").unwrapped.grip_dz + P.FINGER_LENGTH == pytest.approx(
       OD.GRIP_DZ + 0.07)
+  # dishes_to_sink: 12 × 6 cm plate and Ø 6 cm cup, the cup held with the palm 5 mm over its rim, the side
+  # mount lowered 12 cm (the basin floor lies 16 cm below the counter); the gripper keeps its dishes
+  ds = tasks.make("dishes_to_sink", robot="panda").unwrapped
+  md = ds.mj_model
+  np.testing.assert_allclose(md.geom_size[md.geom("plate").id], [0.06, 0.03, 0.01])
+  np.testing.assert_allclose(md.geom_size[md.geom("cup").id], [0.03, 0.03, 0.035])
+  assert ds.cup_grip + P.FINGER_LENGTH == pytest.approx(0.07 + 0.005) and ds.open_gap == 0.07
+  np.testing.assert_allclose(md.body_pos[md.body("panda_link0").id], [-0.05, -0.45, -0.12])
+  dg = tasks.make("dishes_to_sink").unwrapped
+  assert (dg.plate_half, dg.cup_half, dg.cup_grip, dg.plate_grip, dg.open_gap) == (0.06, 0.04, 0.012, 0.004, 0.13)
 
 
 @pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
