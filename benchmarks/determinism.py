@@ -137,6 +137,11 @@ def max_diffs(a, b) -> dict:
   return {k: float(np.max(np.abs(np.asarray(ca[k], np.float64) - np.asarray(cb[k], np.float64)))) for k in ca}
 
 
+def tolerance(env) -> dict:
+  """The |Δ| bounds of the non-bitwise checks for this task: ``TOL_LIQUID`` with liquid, else ``TOL``."""
+  return TOL_LIQUID if env.unwrapped.damage_binding.liquid is not None else TOL
+
+
 def judge(checks: dict, tol: dict, strict: bool) -> None:
   """Sets each check's ``ok`` and ``criterion`` (module docstring) from its recorded differences."""
   within = lambda c: all(c["max_abs_diff"][f] <= t for f, t in tol.items())  # noqa: E731
@@ -168,8 +173,7 @@ def rejudge(path: str, p) -> int:
     # only rerun / chunked are judged by which leaves differ
     if any(len(r["checks"][k]["differing_leaves"]) >= MAX_PATHS for k in ("rerun", "chunked")):
       p.error(f"--rejudge: {r['task']} lists {MAX_PATHS} differing leaves, maybe not all of them; rerun instead")
-    liquid = tasks.make(r["task"]).unwrapped.damage_binding.liquid is not None
-    judge(r["checks"], TOL_LIQUID if liquid else TOL, res["strict"])
+    judge(r["checks"], tolerance(tasks.make(r["task"])), res["strict"])
     r["ok"] = r["envs_distinct"] and all(c["ok"] for c in r["checks"].values())
   res["ok"] = all(r["ok"] for r in res["tasks"])
   res["rejudged"] = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
@@ -207,7 +211,7 @@ def check_task(name: str, envs: int, steps: int, seed: int, strict: bool) -> dic
                 for i, t in enumerate(m)}
   checks["half_batch"] = {"bitwise": not bad, "max_abs_diff": {k: max(d[k] for d in diffs) for k in diffs[0]},
                           "differing_leaves": bad[:MAX_PATHS], "divergence_obs": divergence}
-  judge(checks, TOL_LIQUID if env.unwrapped.damage_binding.liquid is not None else TOL, strict)
+  judge(checks, tolerance(env), strict)
   # the envs differ from each other, so equality is not trivially true
   distinct = not np.array_equal(np.asarray(ref.obs[0]), np.asarray(ref.obs[1]))
   return {"task": name, "envs": envs, "steps": steps, "chunks": list(split), "checks": checks,

@@ -239,6 +239,8 @@ def main(argv=None) -> int:
     p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(robots.names())}")
   names = ([t for t in tasks.names() if args.robot in tasks.robots_for(t)] if args.tasks is None
            else [t for t in args.tasks.split(",") if t])
+  if not names:
+    p.error("--tasks: no task given")
   for t in names:
     if t not in tasks.names():
       p.error(f"--tasks: unknown task {t!r}; valid: {', '.join(tasks.names())}")
@@ -255,8 +257,7 @@ def main(argv=None) -> int:
     p.error(f"--workers: must be >= 1, got {args.workers}")
   per_env = -(-steps // args.envs)
   dev = jax.devices()[0]
-  stem = f"soak_{dev.platform}" if args.robot == robots.DEFAULT else f"soak_{args.robot}_{dev.platform}"
-  out = args.out or os.path.join(HERE, "results", stem + ".json")
+  out = args.out or default_out(dev.platform, args.robot)
   if args.workers > 1:
     return run_workers(argv if argv is not None else sys.argv[1:], names, args.workers, out, p)
   t0 = time.perf_counter()
@@ -278,9 +279,23 @@ def main(argv=None) -> int:
         "tasks": rows, "missing": names[len(rows):], "complete": len(rows) == len(names),
         "ok": len(rows) == len(names) and all(failures(r) == 0 for r in rows),
     }
-    io.write_json(out, res)
-    io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
+    write(res, out, quiet=True)
   print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")
+  return 0 if res["ok"] else 1
+
+
+def default_out(platform_name: str, robot: str) -> str:
+  """benchmarks/results/soak_<platform>.json, or soak_<robot>_<platform>.json for a robot but the default."""
+  stem = "soak_" + ("" if robot == robots.DEFAULT else robot + "_") + platform_name
+  return os.path.join(HERE, "results", stem + ".json")
+
+
+def write(res: dict, out: str, quiet: bool = False) -> int:
+  """Writes ``res`` to ``out`` and its Markdown beside it; the exit status of a soak (0: PASS)."""
+  io.write_json(out, res)
+  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
+  if not quiet:
+    print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")
   return 0 if res["ok"] else 1
 
 
@@ -305,22 +320,24 @@ def run_workers(argv: list[str], names: list[str], workers: int, out: str, p) ->
     if not written:
       print(f"soak: no worker wrote results (exit codes {codes})", file=sys.stderr)
       return 2
-    rc = merge(written, out, p)
+    res = merged(written, p)
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py", *argv])
-  with open(out) as f:
-    res = json.load(f)
-  # total_s: this command's wall time (the workers overlap; their sum is worker_s)
   done = {t["task"] for t in res["tasks"]}
   missing = [n for n in names if n not in done]  # a worker stopped or crashed before these
+  # total_s: this command's wall time (the workers overlap; their sum is worker_s)
   res = dict(res, command=command, workers=workers, worker_s=res["total_s"], total_s=round(time.perf_counter() - t0, 1),
              missing=missing, complete=not missing, ok=res["ok"] and not missing)
-  io.write_json(out, res)
-  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
-  return rc if not missing else max(rc, 1)
+  return write(res, out)
 
 
 def merge(paths, out, p) -> int:
   """One results file from several (same device and settings), rows in task order; exit status as a soak."""
+  res = merged(paths, p)
+  return write(res, out or default_out(res["device"].split(":")[0], res.get("robot", robots.DEFAULT)))
+
+
+def merged(paths, p) -> dict:
+  """The results of several soak files (same device and settings) as one, rows in task order."""
   runs = []
   for path in paths:
     try:
@@ -338,16 +355,9 @@ def merge(paths, out, p) -> int:
   if len(set(names)) != len(names):
     p.error(f"--merge: a task appears twice: {names}")
   missing = sorted(t for r in runs for t in r.get("missing", []))
-  res = dict(runs[0], tasks=rows, missing=missing, complete=not missing,
-             ok=not missing and all(failures(t) == 0 for t in rows),
-             command="; ".join(r["command"] for r in runs), total_s=round(sum(r["total_s"] for r in runs), 1))
-  robot = res.get("robot", robots.DEFAULT)
-  stem = "soak_" + ("" if robot == robots.DEFAULT else robot + "_") + res["device"].split(":")[0]
-  out = out or os.path.join(HERE, "results", stem + ".json")
-  io.write_json(out, res)
-  io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
-  print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")
-  return 0 if res["ok"] else 1
+  return dict(runs[0], tasks=rows, missing=missing, complete=not missing,
+              ok=not missing and all(failures(t) == 0 for t in rows),
+              command="; ".join(r["command"] for r in runs), total_s=round(sum(r["total_s"] for r in runs), 1))
 
 
 if __name__ == "__main__":

@@ -120,7 +120,8 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   import tasks
   from mjx_damage import physics
 
-  env = tasks.make(name) if robot is None else tasks.make(name, robot=robot)
+  robot = robot or tasks.robots.DEFAULT
+  env = tasks.make(name, robot=robot)
   task = env.unwrapped
   override = _physics_override(task, variant)
   if override is not None:
@@ -171,7 +172,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
     best = min(best, clock() - t0)
   d = carry[0] if variant.startswith("raw") else carry[0].pipeline_state
   row = {
-      "task": name, "robot": robot or tasks.robots.DEFAULT, "variant": variant, "envs": envs, "steps": steps,
+      "task": name, "robot": robot, "variant": variant, "envs": envs, "steps": steps,
       "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s,
       "finite": bool(jnp.all(jnp.isfinite(d.qpos))),
   }
@@ -197,7 +198,7 @@ def precompile(argv: list[str], pairs: list[tuple[str, str]], workers: int) -> N
   env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")
   shares = [pairs[i::workers] for i in range(workers) if pairs[i::workers]]
   procs = []
-  for share in shares:  # one child per (task, variant) share: each pair is its own --tasks/--variants call
+  for share in shares:  # one shell per share, running one child per (task, variant) pair of it in turn
     cmds = [[sys.executable, os.path.abspath(__file__), *base, "--tasks", n, "--variants", v, "--compile-only"]
             for n, v in share]
     procs.append(subprocess.Popen("; ".join(shlex.join(c) for c in cmds), shell=True, env=env))
@@ -283,8 +284,8 @@ def main(argv=None) -> int:
 
   from mjx_damage import io
 
-  make = (lambda n: tasks.make(n)) if a.robot is None else (lambda n: tasks.make(n, robot=a.robot))  # noqa: E731
-  pairs = [(n, v) for n in names for v in variants if applicable(make(n).unwrapped, v)]
+  probes = {n: tasks.make(n, robot=a.robot or tasks.robots.DEFAULT).unwrapped for n in names}
+  pairs = [(n, v) for n in names for v in variants if applicable(probes[n], v)]
   clock = time.perf_counter if a.clock == "wall" else time.process_time
   if a.compile_only:
     for n, v in pairs:

@@ -130,10 +130,9 @@ class DishesToSink(Task):
     self.plate_half = PLATE_HALF_Y.get(robot_cls.name, NARROW_HALF_Y)
     self.cup_half = CUP_HALF_Y.get(robot_cls.name, NARROW_HALF_Y)
     self.plate_grip = PLATE_GRIP_BY_ROBOT.get(robot_cls.name, LOW_PLATE_GRIP)
-    # the cup's grip point: CUP_GRIP above its bottom, or higher where the fingers are too short for the
-    # palm to clear the rim from there (the Panda's 5.5 cm; the gripper's 7 cm clear it)
-    short = robot_cls.finger_length < 2 * CUP_HALF_H - CUP_GRIP
-    self.cup_grip = round(2 * CUP_HALF_H + PALM_CLEARANCE - robot_cls.finger_length, 6) if short else CUP_GRIP
+    # the cup's grip point above its bottom, raised where the fingers are too short for the palm to clear the rim
+    self.cup_grip = round(R.grip_height_clearing_palm(CUP_GRIP, 2 * CUP_HALF_H, robot_cls.finger_length,
+                                                      PALM_CLEARANCE), 6)
     # let go: the wider dish + 1 cm (the gripper's plate: 13 cm; the Panda's 6 cm dishes: 7 cm)
     widest = max(self.plate_half, self.cup_half)
     self.open_gap = OPEN_GAP if self.plate_half == PLATE_HALF else round(2 * widest + 0.01, 6)

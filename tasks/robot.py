@@ -54,6 +54,17 @@ def squeeze_command(half_width, inside=0.03):
 
 
 # -- helpers for scripted policies ------------------------------------------------
+def grip_height_clearing_palm(grip, top, finger_length, clearance=0.005):
+  """Grip-point height (m, any common origin) for grasping an object whose top is at ``top``.
+
+  ``grip`` where fingers of ``finger_length`` (grip point to palm underside) already keep the palm above
+  the top from there; otherwise the grip point rises until the palm is ``clearance`` above the top (the
+  Panda's 5.5 cm fingers on tall objects; the gripper's 7 cm clear them)."""
+  if finger_length < top - grip:
+    return top + clearance - finger_length
+  return grip
+
+
 def move_toward(eef, target, speed=1.0, gain=1.0):
   """Position-delta action f32[3] moving ``eef`` toward ``target`` (m, f32[3]).
 

@@ -145,10 +145,8 @@ class ShelveItem(Task):
   def edit_scene(self, spec, robot_cls) -> None:
     self.box_half_y = BOX_HALF_Y.get(robot_cls.name, NARROW_BOX_HALF_Y)
     self.grip_closed = R.squeeze_command(self.box_half_y)  # 3 cm inside each side
-    # grip point above the box centre: GRIP_DZ, or higher where the fingers are too short for the palm
-    # to clear the box top from there (the Panda's 5.5 cm; the gripper's 7 cm clear it)
-    short = robot_cls.finger_length < BOX_HALF[2] - GRIP_DZ
-    self.grip_dz = BOX_HALF[2] + PALM_CLEARANCE - robot_cls.finger_length if short else GRIP_DZ
+    # grip point above the box centre, raised where the fingers are too short for the palm to clear its top
+    self.grip_dz = R.grip_height_clearing_palm(GRIP_DZ, BOX_HALF[2], robot_cls.finger_length, PALM_CLEARANCE)
     if self.box_half_y != BOX_HALF[1]:
       g = spec.geom("cereal_box")
       g.size = [g.size[0], self.box_half_y, g.size[2]]
