@@ -79,6 +79,7 @@ def parse(argv=None):
   p.add_argument("--profile", action="store_true",
                  help="after the last repeat, time one iteration split into rollout and update (train(profile=True)): "
                       "where the scaling is lost")
+  p.add_argument("--parts", default="eval,train", help="what to time: eval, train or both (comma-separated)")
   p.add_argument("--append", action="store_true", help="keep the other device counts' rows of an earlier results file")
   args = p.parse_args(argv)
   if args.repeats < 2:
@@ -90,6 +91,9 @@ def parse(argv=None):
     assert isinstance(args.config, dict)
   except (json.JSONDecodeError, AssertionError):
     p.error(f"--config: a JSON object, got {args.config!r}")
+  args.parts = [x.strip() for x in args.parts.split(",") if x.strip()]
+  if not args.parts or set(args.parts) - {"eval", "train"}:
+    p.error(f"--parts: eval, train or eval,train; got {','.join(args.parts)!r}")
   args.seeds = tuple(int(s) for s in args.seeds.split(","))
   args.fragility = [float(f) for f in args.fragility.split(",")]
   return args
@@ -175,8 +179,10 @@ def write(base: str, payload: dict) -> None:
   one = next((r for r in rows if r["devices"] == 1), None)
 
   def cell(r, part):
+    if part not in r:
+      return "not timed | –"
     s = r[part]["env_steps_per_s"]
-    speed = f" | {s['mean'] / one[part]['env_steps_per_s']['mean']:.2f}x" if one else " | –"
+    speed = f" | {s['mean'] / one[part]['env_steps_per_s']['mean']:.2f}x" if one and part in one else " | –"
     return f"{s['mean']:,.0f} ({s['min']:,.0f}–{s['max']:,.0f}){speed}"
 
   commands = "; ".join(f"`{c}`" for c in dict.fromkeys(r["command"] for r in rows))
@@ -186,9 +192,9 @@ def write(base: str, payload: dict) -> None:
            "", "| Devices | Train envs (global) | Train env-steps/s | Speedup | Eval episodes | Eval env-steps/s | Speedup |",
            "|---:|---:|---:|---:|---:|---:|---:|"]
   for r in rows:
-    lines.append(f"| {r['devices']} | {r['train']['config']['num_envs']} | {cell(r, 'train')} | "
-                 f"{r['eval']['episodes']} | {cell(r, 'eval')} |")
-  prof = [r for r in rows if r["train"].get("profile")]
+    lines.append(f"| {r['devices']} | {r['train']['config']['num_envs'] if 'train' in r else '–'} | {cell(r, 'train')} | "
+                 f"{r['eval']['episodes'] if 'eval' in r else '–'} | {cell(r, 'eval')} |")
+  prof = [r for r in rows if r.get("train", {}).get("profile")]
   if prof:
     lines += ["", "One iteration split (s, last repeat, `--profile`): rollout = env steps + inference; update = "
               "normaliser + SGD epochs with their all-reduces (= iteration − rollout).", "",
@@ -202,7 +208,7 @@ def write(base: str, payload: dict) -> None:
             "|---:|---:|" + "---:|" * len(CURVE_KEYS)]
   for r in rows:
     by_step = {}
-    for row in r["train"]["curve"]:
+    for row in r.get("train", {}).get("curve", []):
       by_step.setdefault(row["env_steps"], []).append(row)
     for steps, rs in sorted(by_step.items()):
       vals = [sum(x.get(k) or 0.0 for x in rs) / len(rs) for k in CURVE_KEYS]
@@ -220,7 +226,7 @@ def plot(path: str, rows: list) -> None:
   fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
   for j, r in enumerate(rows):
     for ax, key in zip(axes, ("eval/safe_completion", "eval/episode_cost")):
-      pts = sorted((x["env_steps"], x[key]) for x in r["train"]["curve"] if x.get(key) is not None)
+      pts = sorted((x["env_steps"], x[key]) for x in r.get("train", {}).get("curve", []) if x.get(key) is not None)
       ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", color=f"C{j}", label=f"{r['devices']} device(s)")
       ax.set_xlabel("env steps per seed")
       ax.set_title(key)
@@ -245,7 +251,11 @@ def main(argv=None) -> int:
     with open(base + ".json") as f:
       payload["rows"] = [r for r in json.load(f)["rows"] if r["devices"] not in counts]
   for d in counts:
-    payload["rows"].append({"devices": d, "command": command, "eval": eval_runs(args, d), "train": train_runs(args, d)})
+    row = {"devices": d, "command": command}
+    for part, run in (("eval", eval_runs), ("train", train_runs)):
+      if part in args.parts:
+        row[part] = run(args, d)
+    payload["rows"].append(row)
     payload["rows"].sort(key=lambda r: r["devices"])
     write(base, payload)  # after every device count: a timeout keeps the finished ones
   print(f"wrote {base}.md / .json / _curves.png", flush=True)

@@ -24,6 +24,7 @@ import jax
 import numpy as np
 import pytest
 
+from conftest import load_benchmark
 from train import cli, mesh as M
 from train.config import PPOConfig
 from train.envs import resolve_task
@@ -238,10 +239,11 @@ def test_multi_gpu_benchmark_runs_on_two_cpu_devices(tmp_path):
   assert (tmp_path / "multi_gpu_cpu.md").exists() and (tmp_path / "multi_gpu_cpu_curves.png").exists()
 
 
-@pytest.mark.slow
-def test_replicas_stay_equal_across_env_shards():
+def test_replicas_stay_equal_across_env_shards_and_the_iteration_compiles_once():
   """shard_map runs with check_vma=False (MJX's solver does not type-check under it): the leaves laid out
-  P(seeds) — weights, optimizer, normaliser, multiplier, RNG — must still be equal on every env shard."""
+  P(seeds) — weights, optimizer, normaliser, multiplier, RNG — must still be equal on every env shard.
+  And the iteration compiles once: its output state, fed back, must hit the same jit cache entry (a
+  P() vs P(seeds) mismatch once recompiled it at iteration 2, seconds lost inside the timed iterations)."""
   code = """
 import jax, numpy as np, train
 from train.experiments.pusher import PusherEnv
@@ -255,8 +257,10 @@ for tree in (ts.params, ts.opt_state, ts.normalizer, ts.multiplier, ts.rng, ts.i
     assert np.array_equal(a, b), leaf.shape
 print("REPLICAS EQUAL")
 """
-  p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(2), capture_output=True, text=True, timeout=900)
+  p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(2, JAX_LOG_COMPILES="1"), capture_output=True,
+                     text=True, timeout=900)
   assert p.returncode == 0 and "REPLICAS EQUAL" in p.stdout, p.stderr[-3000:]
+  assert p.stderr.count("Compiling jit(train_iteration)") == 1, p.stderr.count("Compiling jit(train_iteration)")
 
 
 def test_several_devices_switch_to_gspmd(monkeypatch):
@@ -271,3 +275,12 @@ def test_several_devices_switch_to_gspmd(monkeypatch):
     assert M.use_gspmd(2) and not jax.config.jax_use_shardy_partitioner
   finally:
     jax.config.update("jax_use_shardy_partitioner", before)
+
+
+@pytest.mark.parametrize("parts", ["", "eval,bogus", "training"])
+def test_multi_gpu_benchmark_refuses_bad_parts(parts, capsys):
+  mg = load_benchmark("multi_gpu")
+  with pytest.raises(SystemExit) as e:
+    mg.parse(["--parts", parts])
+  assert e.value.code == 2 and "--parts" in capsys.readouterr().err
+  assert mg.parse(["--parts", "train"]).parts == ["train"]
