@@ -162,11 +162,9 @@ class NativeBatchEnv:
 
     def damage(ds, sensordata):
       """ds after the substeps whose sensordata f32[S, nsensordata] was recorded."""
-      def body(ds, sd):
-        ds = physics.apply_signals(ds, sensors.link_signals(layout, sd, ds.temperature, ds.exposure), dt)
-        return ds, None
-
-      ds, _ = jax.lax.scan(body, physics.begin_step(ds), sensordata)
+      # no temperature or liquid here (refused above): both stay as they are over the step
+      signals = jax.vmap(lambda sd: sensors.link_signals(layout, sd, ds.temperature, ds.exposure))(sensordata)
+      ds = physics.apply_recorded_substeps(physics.begin_step(ds), signals, dt)
       return ds.replace(link_vel=sensors.link_velocity(layout, sensordata[-1]))
 
     def post(state, action, fields, sensordata):

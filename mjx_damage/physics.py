@@ -96,6 +96,31 @@ def apply_signals(ds: DamageState, signals: LinkSignals, dt) -> DamageState:
   )
 
 
+def apply_recorded_substeps(ds: DamageState, signals: LinkSignals, dt) -> DamageState:
+  """``apply_signals`` over S substeps whose signals are all known beforehand (leading axis S on every leaf).
+
+  For backends that record the substeps first and evaluate damage afterwards (the native one): the
+  damage models run once, vectorised over the substeps, and only the health integration, the
+  per-step damage sum and the peak loads go substep by substep, in ``apply_signals``'s order, so the
+  result equals S ``apply_signals`` calls. The signals must not depend on the health they change
+  (true of contact forces, accelerations and a temperature or exposure held over the step).
+  """
+  ev = jax.vmap(evaluate, in_axes=(0, None))(signals, ds.params)
+  rate, total = ev.rate, ev.rate.total()  # f32[S, L] per model, and summed
+
+  def body(carry, s):
+    health, step_damage = carry
+    lost = jax.tree.map(lambda r: jnp.maximum(r[s], 0.0) * (dt / ds.params.tau), rate)
+    return (H.integrate(health, total[s], dt, ds.params.tau), jax.tree.map(jnp.add, step_damage, lost)), None
+
+  # unrolled: S is small and static, and XLA:CPU pays per loop iteration for each of these tiny ops
+  (health, step_damage), _ = jax.lax.scan(body, (ds.link_health, ds.step_damage), jnp.arange(total.shape[0]),
+                                          unroll=True)
+  return ds.replace(link_health=health, step_damage=step_damage,
+                    f_par=jnp.maximum(ds.f_par, jnp.max(ev.f_par, axis=0)),
+                    f_perp=jnp.maximum(ds.f_perp, jnp.max(ev.f_perp, axis=0)))
+
+
 def _integrate(m: mjx.Model, d: mjx.Data) -> mjx.Data:
   integ = m.opt.integrator
   if integ == mjx.IntegratorType.EULER:
