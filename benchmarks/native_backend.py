@@ -18,6 +18,10 @@
 3. **Impact loads** (``--task``, ``--peak-envs`` episodes): the largest per-substep F∥
    on each link with the scripted unsafe policy on both backends — why health can
    differ between them while the verdicts agree.
+4. **K free boxes** (``--boxes``, default 1,32; '' skips): the K-box table scene with
+   damage on, the native backend (``--box-envs`` at once) against the reference-style
+   pipeline (:mod:`mjx_damage.reference`: native MuJoCo one env at a time, per-entity
+   Python damage evaluators; ``--ref-envs``, capped at ``--ref-max-s``), same steps.
 
 Writes ``benchmarks/results/native_backend_<platform>.{json,md}`` (``--out`` overrides the stem); a
 section this run skips (``--skip-throughput``/``--skip-peaks``/``--skip-separation``) is kept from the existing JSON, and
@@ -109,6 +113,50 @@ def peaks(task: str, envs: int, steps: int, threads: int) -> dict:
   return {"task": task, "envs": envs, "steps": steps, "peak_f_par_N": out}
 
 
+def boxes(ks: list[int], envs: int, steps: int, repeats: int, threads: int, ref_envs: int, ref_max_s: float) -> list[dict]:
+  """The K-box table scene (K free tracked boxes and a pusher on an open-loop Lissajous path), damage on:
+  the native batched backend (``envs`` at once, ``steps`` control steps, best of ``repeats``) against the
+  reference-style pipeline (native MuJoCo one env at a time, per-entity Python damage evaluators) and plain
+  ``mj_step`` without damage, one env at a time on one thread, over the same ``steps``."""
+  from mjx_damage import reference
+  from tasks.bench_table import pusher_ctrl, table_env
+
+  rows = []
+  for k in ks:
+    env = table_env(k)
+    nenv = tasks.native.wrap(env, envs, nthread=threads)
+    n_sub = int(env.n_substeps)
+    step_s = float(env.mj_model.opt.timestep) * n_sub
+    act = [jnp.broadcast_to(jnp.asarray(pusher_ctrl(t * step_s, env.radius) / env.radius, jnp.float32), (envs, 2))
+           for t in range(steps)]  # the pusher target at the step's start time, as the reference reads it
+    state0 = nenv.reset(jax.random.split(jax.random.PRNGKey(1), envs))
+    jax.block_until_ready(nenv.step(state0, act[0]))  # compile
+    runs = []
+    for _ in range(repeats):
+      s, t0 = state0, time.perf_counter()
+      for a in act:
+        s = nenv.step(s, a)
+      jax.block_until_ready(s)
+      runs.append(envs * steps / (time.perf_counter() - t0))
+    # the reference starts from the first native envs' reset configurations
+    keys = jax.random.split(jax.random.PRNGKey(1), max(envs, ref_envs))[:ref_envs]
+    q = np.asarray(jax.vmap(env.reset)(keys).pipeline_state.qpos, np.float64)
+    ctrl = lambda t, r=env.radius: pusher_ctrl(t, r)  # noqa: E731
+    ref = reference.time_reference(env.mj_model, env.damage_binding, n_sub, q, ctrl, steps, True, ref_max_s)
+    plain = reference.time_reference(env.mj_model, env.damage_binding, n_sub, q, ctrl, steps, False, ref_max_s)
+    row = {"boxes": k, "envs": envs, "steps": steps, "threads": nenv.nthread, "n_substeps": n_sub,
+           "native_env_steps_per_s": max(runs), "native_runs": runs,
+           "native_min_health": float(np.mean(np.min(np.asarray(s.info["damage_state"].link_health), axis=-1))),
+           "dropped_contacts": int(nenv.dropped_contacts().max()),
+           "reference_env_steps_per_s": ref["env_steps_per_s"], "reference_envs": ref["envs"],
+           "reference_min_health": ref.get("mean_final_min_health"),
+           "mj_step_no_damage_env_steps_per_s": plain["env_steps_per_s"]}
+    row["ratio_vs_reference"] = row["native_env_steps_per_s"] / row["reference_env_steps_per_s"]
+    print(row, flush=True)
+    rows.append(row)
+  return rows
+
+
 def separation(names: list[str], episodes: int, envs: int, threads: int, seed: int, tol: float) -> list[dict]:
   rows = []
   for name in names:
@@ -167,6 +215,24 @@ def markdown(res: dict) -> str:
     lines += [f"| {n} | {pk['peak_f_par_N']['mjx'][n]:.1f} | {pk['peak_f_par_N']['native'][n]:.1f} |"
               for n in pk["peak_f_par_N"]["mjx"]]
     lines.append("")
+  bx = res.get("boxes")
+  if bx:
+    b0 = bx[0]
+    lines += [f"## K free boxes: native batched backend vs the reference-style pipeline, damage on", "",
+              f"Command: `{res['boxes_command']}` ({res['boxes_date']})", "",
+              f"The K-box table scene (`tasks/bench_table.py`: K free, tracked boxes and a pusher on an open-loop "
+              f"path), {b0['steps']} control steps of {b0['n_substeps']} substeps. Native batched: {b0['envs']} envs "
+              f"at once on {b0['threads']} C threads, best of {len(b0['native_runs'])}. Reference-style: native "
+              "MuJoCo one env at a time with per-entity Python damage evaluators (`mjx_damage.reference`), and "
+              "plain `mj_step` without damage, one thread, over the same steps.", "",
+              "| K | native batched, damage (env steps/s) | reference-style, damage | mj_step, no damage, 1 env | "
+              "native / reference | mean final min health native / reference | contacts beyond the slots |",
+              "|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in bx:
+      lines.append(f"| {r['boxes']} | {r['native_env_steps_per_s']:,.1f} | {r['reference_env_steps_per_s']:,.1f} | "
+                   f"{r['mj_step_no_damage_env_steps_per_s']:,.1f} | **{r['ratio_vs_reference']:.1f}×** | "
+                   f"{r['native_min_health']:.1f} / {r['reference_min_health']:.1f} | {r['dropped_contacts']} |")
+    lines += ["", "Target: ≥ 5× the reference-style pipeline at 32 free boxes.", ""]
   sep = res.get("separation")
   if sep:
     lines += [
@@ -207,9 +273,24 @@ def main(argv=None) -> int:
   p.add_argument("--skip-throughput", action="store_true")
   p.add_argument("--skip-separation", action="store_true")
   p.add_argument("--skip-peaks", action="store_true")
+  p.add_argument("--boxes", default="1,32", help="K of the K-box comparison with the reference pipeline ('': skip)")
+  p.add_argument("--box-envs", type=int, default=64)
+  p.add_argument("--box-steps", type=int, default=25)
+  p.add_argument("--ref-envs", type=int, default=4, help="reference-style envs, run one after another")
+  p.add_argument("--ref-max-s", type=float, default=10.0, help="stop starting reference envs after this long")
   p.add_argument("--peak-envs", type=int, default=8)
   p.add_argument("--out", default=None, help="output stem (default benchmarks/results/native_backend_<platform>)")
   args = p.parse_args(argv)
+  try:
+    args.box_ks = [int(k) for k in args.boxes.split(",") if k.strip()]
+  except ValueError:
+    p.error(f"--boxes: comma-separated box counts, got {args.boxes!r}")
+  for name, v in (("--boxes", min(args.box_ks, default=1)), ("--box-envs", args.box_envs),
+                  ("--box-steps", args.box_steps), ("--ref-envs", args.ref_envs)):
+    if v < 1:
+      p.error(f"{name}: must be >= 1, got {v}")
+  if not args.ref_max_s > 0:  # NaN too
+    p.error(f"--ref-max-s: must be > 0 s, got {args.ref_max_s}")
   _, desc = device_info()
   command = "python benchmarks/native_backend.py " + " ".join(sys.argv[1:] if argv is None else argv)
   stem = args.out or os.path.join(RESULTS, f"native_backend_{jax.default_backend()}")
@@ -227,6 +308,10 @@ def main(argv=None) -> int:
     res["peaks"] = peaks(args.task, args.peak_envs, args.steps, args.threads)
     res["peaks"].update(command=command, date=date)
     print(res["peaks"], flush=True)
+  if args.box_ks:
+    res["boxes"] = boxes(args.box_ks, args.box_envs, args.box_steps, args.repeats, args.threads, args.ref_envs,
+                         args.ref_max_s)
+    res.update(boxes_command=command, boxes_date=date)
   if not args.skip_separation:
     runnable = native_tasks()
     names = [n for n in args.tasks.split(",") if n] or runnable

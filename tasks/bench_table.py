@@ -167,6 +167,7 @@ class TableEnv(DamageEnv):
       raise ValueError(f"free: free boxes must be an int in [1, k={k}] (box 0 is observed), got {free!r}")
     super().__init__(table_scene(k, solver=solver, jacobian=jacobian, free=free), table_config(k, tracked),
                      n_substeps)
+    self.scene_kwargs = dict(solver=solver, jacobian=jacobian, free=free)  # table_scene_xml's, for other backends
     self.k = k  # boxes in the scene
     self.free = free  # boxes 0..free-1 are free bodies, the rest mounted
     self.tracked = k if tracked is None else tracked  # boxes whose damage is computed

@@ -19,7 +19,7 @@ import mujoco
 
 import tasks
 from mjx_damage.native_batch import DEFAULT_SLOTS, NativeBatchEnv
-from tasks import drop
+from tasks import bench_table, drop
 from tasks.base import Task
 
 
@@ -32,8 +32,10 @@ def scene_spec(env) -> mujoco.MjSpec:
   task = getattr(env, "unwrapped", env)
   if isinstance(task, drop.DropEnv):
     return mujoco.MjSpec.from_file(drop.SCENE)
+  if isinstance(task, bench_table.TableEnv):
+    return mujoco.MjSpec.from_string(bench_table.table_scene_xml(task.k, **task.scene_kwargs))
   if not isinstance(task, Task):
-    raise ValueError(f"env: the native backend runs task-suite scenes and drop, got {type(task).__name__}")
+    raise ValueError(f"env: the native backend runs task-suite scenes, drop and the K-box table, got {type(task).__name__}")
   module = __import__(type(task).__module__, fromlist=["_"])
   with open(os.path.join(os.path.dirname(module.__file__), task.xml)) as f:
     text = f.read()

@@ -6,6 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from conftest import load_benchmark
+
 import tasks
 import tasks.native
 from apps import eval_cli
@@ -143,3 +145,22 @@ def test_recorded_substeps_equal_one_apply_signals_per_substep(drop):
   assert float(ref.step_damage.mechanical.sum()) > 0 and float(ref.link_health.min()) == 0.0
   for a, b in zip(jax.tree.leaves(ref), jax.tree.leaves(got)):
     np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-5)
+
+
+def test_box_scene_comparison_with_the_reference_pipeline():
+  """benchmarks/native_backend.py's K-box section at toy size: the table scene runs on the native backend."""
+  nb = load_benchmark("native_backend")
+  (row,) = nb.boxes([2], envs=2, steps=2, repeats=1, threads=1, ref_envs=1, ref_max_s=5.0)
+  assert row["boxes"] == 2 and row["dropped_contacts"] == 0 and len(row["native_runs"]) == 1
+  assert row["native_env_steps_per_s"] > 0 and row["reference_env_steps_per_s"] > 0
+  assert 0.0 <= row["native_min_health"] <= 100.0 and 0.0 <= row["reference_min_health"] <= 100.0
+  md = nb.markdown({"device": "cpu", "boxes": [row], "boxes_command": "x", "boxes_date": "d"})
+  assert "| 2 |" in md and "reference-style" in md
+
+
+@pytest.mark.parametrize("argv, field", [(["--boxes", "1,x"], "--boxes"), (["--boxes", "0"], "--boxes"),
+                                         (["--box-envs", "0"], "--box-envs"), (["--ref-max-s", "nan"], "--ref-max-s")])
+def test_native_benchmark_refuses_bad_box_flags(argv, field, capsys):
+  with pytest.raises(SystemExit) as e:
+    load_benchmark("native_backend").main(argv)
+  assert e.value.code == 2 and field in capsys.readouterr().err
