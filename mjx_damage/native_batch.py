@@ -14,7 +14,8 @@ instead of MJX. One control step of B environments is
 3. ``finish_fn`` (jitted, vmapped): the env's ``step`` again, its
    ``physics_step`` replaced by the native result: the new ``mjx.Data`` fields
    and the damage state from :func:`physics.apply_signals` run over the
-   recorded substeps (a ``lax.scan``) — the damage functions are untouched, and
+   recorded substeps (:func:`physics.apply_recorded_substeps`: the models vectorised
+   over the substeps, health integrated substep by substep) — the damage functions are untouched, and
    everything after the physics (task reward, success, observation, the
    wrapper's cost/health/metrics) is the env's own code.
 
