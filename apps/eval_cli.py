@@ -26,7 +26,7 @@ COMPILE_S = {"cpu": 40, "gpu": 60}
 def build_parser() -> Parser:
   ap = Parser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
   R.add_task_policy_arguments(ap)
-  R.add_backend_argument(ap)
+  R.add_backend_argument(ap, default="auto")
   ap.add_argument("--native-envs", type=int, default=256,
                   help="native backend: episodes stepped at once (at most --episodes)")
   ap.add_argument("--episodes", type=int, default=64)
@@ -58,18 +58,20 @@ def main(argv=None) -> int:
     out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
     env = R.make_task(args.task)
     policy = R.make_policy(args.policy, env)
-    env = R.on_backend(env, args.backend, min(args.native_envs, args.episodes))
+    backend = R.pick_backend(args.backend, env)
+    env = R.on_backend(env, backend, min(args.native_envs, args.episodes))
     episode_length = args.episode_length or R.episode_length_of(env, args.task)
   except ValueError as e:
     ap.error(str(e))
   platform = jax.default_backend()
   print(f"eval: task {args.task}, policy {args.policy}, {args.episodes} episodes x {episode_length} steps, "
-        f"fragility {args.fragility:g}, seed {args.seed}, backend {args.backend}, "
+        f"fragility {args.fragility:g}, seed {args.seed}, backend {backend}"
+        f"{' (auto)' if args.backend == 'auto' else ''}, "
         f"device {platform} x {jax.device_count()}; "
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
-  program = R.program_description("eval", args.task, args.policy, backend=args.backend)
+  program = R.program_description("eval", args.task, args.policy, backend=backend)
   with heartbeat("eval"):
     res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
                      episode_length=episode_length, safe_threshold=args.safe_threshold,
@@ -82,7 +84,8 @@ def main(argv=None) -> int:
     print("traced program loaded from the cache (no tracing, no compiling)")
   result = {
       "task": args.task, "policy": args.policy, "episodes": args.episodes, "seed": args.seed,
-      "fragility": args.fragility, "episode_length": res["episode_length"], "backend": args.backend,
+      "fragility": args.fragility, "episode_length": res["episode_length"], "backend": backend,
+      "backend_requested": args.backend,
       "command": "mjx-damage eval " + " ".join(sys.argv[1:] if argv is None else argv),
       "metrics": res["metrics"], "wall_s": wall,
   }

@@ -14,6 +14,8 @@ from __future__ import annotations
 import os
 from typing import Optional
 
+import jax
+
 import apps
 import mjx_damage
 import tasks
@@ -26,7 +28,7 @@ from tasks.drop import DropEnv
 from train import checkpoint as ckpt
 from train import evaluate as E
 
-BACKENDS = ("mjx", "native")
+BACKENDS = ("auto", "mjx", "native")
 POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint:PATH")
 # Built-in scenes usable as tasks, with their episode lengths in env steps.
 BUILTIN_TASKS = {"drop": 50, "push_boxes": 50}
@@ -60,22 +62,37 @@ def check_backend(name) -> str:
   return name
 
 
-def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
-  """``env`` itself for ``mjx``; its :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``num_envs`` for ``native``.
+def pick_backend(backend: str, env, num_devices: int = 1) -> str:
+  """``mjx`` or ``native`` for ``--backend``: ``auto`` is whichever is faster for ``env``.
 
-  Raises ValueError for a scene the native backend cannot run (heat sources, liquid, built-in ``push_boxes``).
+  That is native on a CPU run over one device whose scene the native backend runs (about 10x the
+  MJX-JAX env-steps/s on 2 cores: benchmarks/results/native_backend_cpu.md), else mjx (accelerators,
+  several devices, heat sources, liquid). The two agree on completion and safe completion; health
+  and cost can differ (README, "Native batched backend")."""
+  if check_backend(backend) != "auto":
+    return backend
+  cpu_only = jax.default_backend() == "cpu"
+  return "native" if cpu_only and num_devices == 1 and tasks.native.supports(env) else "mjx"
+
+
+def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
+  """``env`` itself for ``mjx``; its :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``num_envs`` for
+  ``native``; ``auto`` as :func:`pick_backend` decides for one device.
+
+  Raises ValueError for a scene the native backend cannot run (heat sources, liquid).
   """
-  if check_backend(backend) == "mjx":
+  if pick_backend(backend, env) == "mjx":
     return env
   return tasks.native.wrap(env, num_envs, nthread=nthread)
 
 
-def add_backend_argument(ap, scope: str = "") -> None:
-  """``--backend mjx|native`` as every command spells it; ``scope`` adds what the choice applies to
+def add_backend_argument(ap, scope: str = "", default: str = "mjx") -> None:
+  """``--backend auto|mjx|native`` as every command spells it; ``scope`` adds what the choice applies to
   (bench: only its task throughput), so the one help text says where it does not."""
-  ap.add_argument("--backend", default="mjx",
-                  help="physics: mjx (compiled MJX-JAX, batched on any device) or native (MuJoCo on C threads, "
-                       "CPU; scenes without heat sources or liquid)" + (f"; {scope}" if scope else ""))
+  ap.add_argument("--backend", default=default,
+                  help=f"physics (default {default}): mjx (compiled MJX-JAX, batched on any device), native "
+                       "(MuJoCo on C threads, CPU; scenes without heat sources or liquid) or auto (native on a "
+                       "one-device CPU run where the scene allows, else mjx)" + (f"; {scope}" if scope else ""))
 
 
 def episode_length_of(env, task: Optional[str] = None) -> int:

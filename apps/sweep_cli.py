@@ -43,7 +43,7 @@ def build_parser() -> Parser:
   ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
   ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
-  R.add_backend_argument(ap)
+  R.add_backend_argument(ap, default="auto")
   ap.add_argument("--native-envs", type=int, default=256,
                   help="native backend: episodes stepped at once (at most fragility levels x --episodes)")
   ap.add_argument("--out", default=None, help="JSON path; the markdown table goes beside it (.md) "
@@ -110,6 +110,7 @@ def main(argv=None) -> int:
         "num_devices": len(devices), "processes": jax.process_count(),  # episodes are sharded over them
         "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
         "episodes": args.episodes, "safe_threshold": args.safe_threshold, "backend": args.backend,
+        "backend_per_task": dict(backends),
         "executables_compiled": res["compiles"],
         "wall_s": time.perf_counter() - t0, "complete": complete,
         "rows": res["rows"], "runs": res["runs"],
@@ -123,15 +124,23 @@ def main(argv=None) -> int:
     return md
 
   native_envs = min(args.native_envs, len(levels) * args.episodes)
+  backends = {}  # task → the backend it ran on (auto picks per task)
+
+  def backend_of(task, env=None):
+    if task not in backends:
+      backends[task] = R.pick_backend(args.backend, R.make_task(task) if env is None else env,
+                                      len(devices) * jax.process_count())
+    return backends[task]
 
   def make_env(task):
-    return R.on_backend(R.make_task(task), args.backend, native_envs)
+    env = R.make_task(task)
+    return R.on_backend(env, backend_of(task, env), native_envs)
 
   with heartbeat("sweep"):
     res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
                   devices=devices, on_progress=lambda r: write(r, False), make_env=make_env,
                   make_policy=R.make_policy, episode_length_of=R.episode_length_of,
-                  describe_program=lambda task, spec: R.program_description("sweep", task, spec, backend=args.backend),
+                  describe_program=lambda task, spec: R.program_description("sweep", task, spec, backend=backend_of(task)),
                   program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")

@@ -44,6 +44,15 @@ def scene_spec(env) -> mujoco.MjSpec:
   return mujoco.MjSpec.from_string(text, {"robot.xml": robot_xml})
 
 
+def supports(env) -> bool:
+  """Whether the native backend runs ``env`` (wrapped or bare): a task-suite, drop or K-box scene
+  without heat sources or liquid (:class:`NativeBatchEnv` refuses those)."""
+  task = getattr(env, "unwrapped", env)
+  binding = getattr(task, "damage_binding", None)
+  return (isinstance(task, (Task, drop.DropEnv, bench_table.TableEnv)) and binding is not None
+          and binding.thermal is None and binding.liquid is None)
+
+
 def wrap(env, num_envs: int, nthread: int = 0, slots: int = DEFAULT_SLOTS) -> NativeBatchEnv:
   """``num_envs`` native copies of an env :func:`tasks.make` (or ``DamageWrapper(DropEnv())``) built."""
   return NativeBatchEnv(env, scene_spec(env), num_envs, nthread=nthread, slots=slots)

@@ -55,9 +55,11 @@ def test_training_refused_before_compiling(env):
 
 
 def test_cli_refuses_a_batch_that_cannot_fit(tmp_path):
-  """Ten million episodes of a task: one line naming --episodes-as-field, exit 2, well before any compile."""
+  """A hundred million episodes of a task in one MJX batch: one line naming --episodes-as-field, exit 2, well
+  before any compile. (``--backend mjx``: the native backend steps --native-envs at a time, so its memory
+  does not grow with --episodes; on a CPU ``auto`` would pick it.)"""
   p = subprocess.run([sys.executable, "-m", "apps.cli", "eval", "--task", "push_boxes", "--policy", "zero",
-                      "--episodes", "100000000", "--out", str(tmp_path / "r.json")], cwd=tmp_path,
+                      "--backend", "mjx", "--episodes", "100000000", "--out", str(tmp_path / "r.json")], cwd=tmp_path,
                      env=dict(os.environ, PYTHONPATH=ROOT), capture_output=True, text=True, timeout=300)
   assert p.returncode == 2, p.stderr[-2000:]
   err = [line for line in p.stderr.splitlines() if line.strip()]

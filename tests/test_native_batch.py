@@ -1,5 +1,7 @@
 """The native batched backend: same damage as the single-env native path, same State as MJX, bad input."""
 
+import json
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -164,3 +166,25 @@ def test_native_benchmark_refuses_bad_box_flags(argv, field, capsys):
   with pytest.raises(SystemExit) as e:
     load_benchmark("native_backend").main(argv)
   assert e.value.code == 2 and field in capsys.readouterr().err
+
+
+def test_auto_backend_picks_native_on_a_one_device_cpu_run_where_the_scene_allows():
+  place, pour = tasks.make("place_plate"), tasks.make("pour_water")
+  assert tasks.native.supports(place) and tasks.native.supports(R.make_task("push_boxes"))
+  assert tasks.native.supports(R.make_task("drop")) and not tasks.native.supports(pour)  # liquid
+  assert not tasks.native.supports(tasks.make("add_firewood"))  # heat source
+  assert jax.default_backend() == "cpu"
+  assert R.pick_backend("auto", place) == "native" and R.pick_backend("auto", pour) == "mjx"
+  assert R.pick_backend("auto", place, num_devices=2) == "mjx"  # native steps on one host, no sharding
+  assert R.pick_backend("mjx", place) == "mjx" and R.pick_backend("native", place) == "native"
+  with pytest.raises(ValueError, match="backend: unknown backend"):
+    R.pick_backend("warp", place)
+
+
+def test_eval_defaults_to_auto_and_records_the_backend_it_used(tmp_path, capsys):
+  out = tmp_path / "r.json"
+  assert eval_cli.main(["--task", "drop", "--policy", "zero", "--episodes", "2", "--episode-length", "3",
+                        "--out", str(out)]) == 0
+  res = json.load(open(out))
+  assert res["backend"] == "native" and res["backend_requested"] == "auto"
+  assert "backend native (auto)" in capsys.readouterr().out
