@@ -233,7 +233,8 @@ def test_task_throughput_on_native_backend():
   assert row["physics_steps_per_s"] == pytest.approx(row["env_steps_per_s"] * row["n_substeps"])
 
 
-def test_bench_cli_records_native_task_backend(tmp_path, monkeypatch):
+@pytest.mark.parametrize("backend", ["native", "auto"])  # auto on a CPU, place_plate: native
+def test_bench_cli_records_native_task_backend(backend, tmp_path, monkeypatch):
   """--backend native: the task row is timed natively and says so; the K-box points stay MJX (stubbed out
   here, so no MJX program compiles: each is recorded as skipped)."""
   def no_mjx(*a, **k):
@@ -241,7 +242,7 @@ def test_bench_cli_records_native_task_backend(tmp_path, monkeypatch):
 
   monkeypatch.setattr(bench.cli, "measure_pair", no_mjx)
   out = tmp_path / "b.json"
-  assert bench.main(["--backend", "native", "--task", "place_plate", "--task-envs", "2", "--target-s", "0.05",
+  assert bench.main(["--backend", backend, "--task", "place_plate", "--task-envs", "2", "--target-s", "0.05",
                      "--max-steps", "2", "--envs", "1", "--entities", "1", "--tracked", "", "--mounted", "",
                      "--k", "1", "--entity-envs", "1", "--ratio-envs", "1", "--ref-envs", "1", "--ref-steps", "1",
                      "--ref-max-s", "1", "--out", str(out)]) == 0
@@ -249,4 +250,4 @@ def test_bench_cli_records_native_task_backend(tmp_path, monkeypatch):
   assert res["task_backend"] == "native"
   assert res["task"]["backend"] == "native" and res["task"]["env_steps_per_s"] > 0
   assert "(native backend, 2 envs" in (tmp_path / "b.md").read_text()
-  assert "--backend native" in res["command"]
+  assert f"--backend {backend}" in res["command"]

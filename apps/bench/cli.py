@@ -248,7 +248,8 @@ def main(argv=None) -> int:
   args.entity_envs = args.entity_envs or (8192 if gpu else 1024)
   args.ratio_envs = args.ratio_envs or (8192 if gpu else 1024)
   try:
-    R.check_backend(args.backend)
+    if R.check_backend(args.backend) == "auto":  # the task's pick; nothing to pick without a task
+      args.backend = R.pick_backend("auto", R.make_task(args.task)) if args.task in tasks.names() else "mjx"
     native = args.backend == "native"  # native steps on CPU threads whatever the device: the CPU batch
     args.task_envs = args.task_envs or (32768 if gpu and not native else 256)
     envs = _parse_ints("--envs", args.envs)
