@@ -243,8 +243,10 @@ def test_replicas_stay_equal_across_env_shards_and_the_iteration_compiles_once()
   """shard_map runs with check_vma=False (MJX's solver does not type-check under it): the leaves laid out
   P(seeds) — weights, optimizer, normaliser, multiplier, RNG — must still be equal on every env shard.
   And the iteration compiles once: its output state, fed back, must hit the same jit cache entry (a
-  P() vs P(seeds) mismatch once recompiled it at iteration 2, seconds lost inside the timed iterations)."""
+  P() vs P(seeds) mismatch once recompiled it at iteration 2, seconds lost inside the timed iterations).
+  And --profile, which feeds the iteration a copy of the state, runs on 2 devices."""
   code = """
+import sys
 import jax, numpy as np, train
 from train.experiments.pusher import PusherEnv
 r = train.train(PusherEnv(), seeds=(3,), devices=2, num_envs=16, unroll_length=8, num_minibatches=2, batch_size=8,
@@ -256,11 +258,17 @@ for tree in (ts.params, ts.opt_state, ts.normalizer, ts.multiplier, ts.rng, ts.i
     a, b = (np.asarray(s.data) for s in leaf.addressable_shards)
     assert np.array_equal(a, b), leaf.shape
 print("REPLICAS EQUAL")
+print("PROFILED RUN", file=sys.stderr, flush=True)
+r = train.train(PusherEnv(), seeds=(3,), devices=2, num_envs=16, unroll_length=8, num_minibatches=2, batch_size=8,
+                num_updates_per_batch=2, episode_length=24, policy_hidden_sizes=(16, 16), value_hidden_sizes=(16, 16),
+                num_eval_envs=8, num_timesteps=256, progress=False, profile=True)
+assert r.timings["profile/iteration"] > 0  # the profile feeds the iteration a copy of the state
 """
   p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(2, JAX_LOG_COMPILES="1"), capture_output=True,
                      text=True, timeout=900)
   assert p.returncode == 0 and "REPLICAS EQUAL" in p.stdout, p.stderr[-3000:]
-  assert p.stderr.count("Compiling jit(train_iteration)") == 1, p.stderr.count("Compiling jit(train_iteration)")
+  first = p.stderr.split("PROFILED RUN")[0]
+  assert first.count("Compiling jit(train_iteration)") == 1, first.count("Compiling jit(train_iteration)")
 
 
 def test_several_devices_switch_to_gspmd(monkeypatch):
