@@ -140,7 +140,8 @@ def main(argv=None) -> int:
     res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
                   devices=devices, on_progress=lambda r: write(r, False), make_env=make_env,
                   make_policy=R.make_policy, episode_length_of=R.episode_length_of,
-                  describe_program=lambda task, spec: R.program_description("sweep", task, spec, backend=backend_of(task)),
+                  describe_program=lambda task, spec: R.program_description("sweep", task, spec,
+                                                                            backend=backend_of(task)),
                   program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")

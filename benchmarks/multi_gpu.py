@@ -192,7 +192,8 @@ def write(base: str, payload: dict) -> None:
            "", "| Devices | Train envs (global) | Train env-steps/s | Speedup | Eval episodes | Eval env-steps/s | Speedup |",
            "|---:|---:|---:|---:|---:|---:|---:|"]
   for r in rows:
-    lines.append(f"| {r['devices']} | {r['train']['config']['num_envs'] if 'train' in r else '–'} | {cell(r, 'train')} | "
+    train_envs = r["train"]["config"]["num_envs"] if "train" in r else "–"
+    lines.append(f"| {r['devices']} | {train_envs} | {cell(r, 'train')} | "
                  f"{r['eval']['episodes'] if 'eval' in r else '–'} | {cell(r, 'eval')} |")
   prof = [r for r in rows if r.get("train", {}).get("profile")]
   if prof:

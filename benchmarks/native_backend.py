@@ -113,7 +113,8 @@ def peaks(task: str, envs: int, steps: int, threads: int) -> dict:
   return {"task": task, "envs": envs, "steps": steps, "peak_f_par_N": out}
 
 
-def boxes(ks: list[int], envs: int, steps: int, repeats: int, threads: int, ref_envs: int, ref_max_s: float) -> list[dict]:
+def boxes(ks: list[int], envs: int, steps: int, repeats: int, threads: int, ref_envs: int,
+          ref_max_s: float) -> list[dict]:
   """The K-box table scene (K free tracked boxes and a pusher on an open-loop Lissajous path), damage on:
   the native batched backend (``envs`` at once, ``steps`` control steps, best of ``repeats``) against the
   reference-style pipeline (native MuJoCo one env at a time, per-entity Python damage evaluators) and plain
