@@ -49,8 +49,10 @@ import numpy as np  # noqa: E402
 
 import tasks  # noqa: E402
 import tasks.native  # noqa: E402
+from mjx_damage import reference  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 from mjx_damage.runtime import device_info  # noqa: E402
+from tasks.bench_table import pusher_ctrl, table_env  # noqa: E402
 from train import evaluate as E  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(__file__), "results")
@@ -119,9 +121,6 @@ def boxes(ks: list[int], envs: int, steps: int, repeats: int, threads: int, ref_
   the native batched backend (``envs`` at once, ``steps`` control steps, best of ``repeats``) against the
   reference-style pipeline (native MuJoCo one env at a time, per-entity Python damage evaluators) and plain
   ``mj_step`` without damage, one env at a time on one thread, over the same ``steps``."""
-  from mjx_damage import reference
-  from tasks.bench_table import pusher_ctrl, table_env
-
   rows = []
   for k in ks:
     env = table_env(k)
