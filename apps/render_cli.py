@@ -76,6 +76,7 @@ def main(argv=None) -> int:
     task_kwargs = R.checkpoint_task_kwargs(args.policy, args.task) if kind == "checkpoint" else {}
     env = R.make_task(args.task, **task_kwargs)
     policy = R.make_policy(args.policy, env)
+    args.backend = R.pick_backend(args.backend, env)  # auto → the backend used, as printed and recorded
     env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env
     steps = args.steps or R.episode_length_of(env, args.task)
     if args.camera not in (None, "free"):

@@ -366,11 +366,12 @@ def test_cli_writes_gif_and_plots(drop, tmp_path, capsys):
   assert "final health: plate" in capsys.readouterr().out
 
 
-def test_cli_native_backend_writes_frames(gl, tmp_path, capsys):
+@pytest.mark.parametrize("backend", ["native", "auto"])  # auto: native on this one-device CPU
+def test_cli_native_backend_writes_frames(backend, gl, tmp_path, capsys):
   """--backend native: the rollout behind the frames is stepped by native MuJoCo (and the run says so)."""
   out = tmp_path / "native.gif"
   rc = render_cli.main(["--task", "drop", "--policy", "zero", "--out", str(out), "--steps", "2", "--seed", str(SEED),
-                        "--num-envs", "2", "--width", "64", "--height", "48", "--backend", "native"])
+                        "--num-envs", "2", "--width", "64", "--height", "48", "--backend", backend])
   assert rc == 0
   assert len(imageio.mimread(str(out))) == 3 and os.path.exists(tmp_path / "native_env1.gif")
   text = capsys.readouterr().out
