@@ -124,24 +124,19 @@ def main(argv=None) -> int:
     return md
 
   native_envs = min(args.native_envs, len(levels) * args.episodes)
-  backends = {}  # task → the backend it ran on (auto picks per task)
-
-  def backend_of(task, env=None):
-    if task not in backends:
-      backends[task] = R.pick_backend(args.backend, R.make_task(task) if env is None else env,
-                                      len(devices) * jax.process_count())
-    return backends[task]
+  backends = {}  # task → the backend it runs on (auto picks per task); S.sweep makes every env first
 
   def make_env(task):
     env = R.make_task(task)
-    return R.on_backend(env, backend_of(task, env), native_envs)
+    backends[task] = R.pick_backend(args.backend, env, len(devices) * jax.process_count())
+    return R.on_backend(env, backends[task], native_envs)
 
   with heartbeat("sweep"):
     res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
                   devices=devices, on_progress=lambda r: write(r, False), make_env=make_env,
                   make_policy=R.make_policy, episode_length_of=R.episode_length_of,
                   describe_program=lambda task, spec: R.program_description("sweep", task, spec,
-                                                                            backend=backend_of(task)),
+                                                                            backend=backends[task]),
                   program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")

@@ -112,6 +112,14 @@ def sensor_model(env, spec: mujoco.MjSpec, slots: int = DEFAULT_SLOTS):
   return model, layout
 
 
+def refusal(binding) -> Optional[str]:
+  """Why this backend cannot run a scene with this binding (heat sources or liquid), or None."""
+  if binding.thermal is None and binding.liquid is None:
+    return None
+  return ("backend: native has no temperature or liquid model (this scene has "
+          f"{'heat sources' if binding.thermal is not None else 'liquid'}); use backend mjx")
+
+
 class NativeBatchEnv:
   """``num_envs`` copies of a damage-wrapped env, physics in native MuJoCo on ``nthread`` threads.
 
@@ -136,9 +144,8 @@ class NativeBatchEnv:
     binding = getattr(inner, "damage_binding", None)
     if binding is None or not hasattr(inner, "physics_step"):
       raise ValueError(f"env: the native backend needs a DamageEnv (damage per substep), got {type(inner).__name__}")
-    if binding.thermal is not None or binding.liquid is not None:
-      raise ValueError("backend: native has no temperature or liquid model (this scene has "
-                       f"{'heat sources' if binding.thermal is not None else 'liquid'}); use backend mjx")
+    if refusal(binding):
+      raise ValueError(refusal(binding))
     self.env, self.num_envs = env, num_envs
     self.n_substeps = int(inner.n_substeps)
     self.model, self.layout = sensor_model(env, spec, slots)

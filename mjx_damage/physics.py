@@ -87,13 +87,14 @@ def apply_signals(ds: DamageState, signals: LinkSignals, dt) -> DamageState:
   once-per-env-step wrapper fallback all end here.
   """
   ev = evaluate(signals, ds.params)
-  lost = jax.tree.map(lambda r: jnp.maximum(r, 0.0) * (dt / ds.params.tau), ev.rate)
-  return ds.replace(
-      link_health=H.integrate(ds.link_health, ev.rate.total(), dt, ds.params.tau),
-      step_damage=jax.tree.map(jnp.add, ds.step_damage, lost),
-      f_par=jnp.maximum(ds.f_par, ev.f_par),
-      f_perp=jnp.maximum(ds.f_perp, ev.f_perp),
-  )
+  return _lose(ds, ev.rate, dt).replace(f_par=jnp.maximum(ds.f_par, ev.f_par), f_perp=jnp.maximum(ds.f_perp, ev.f_perp))
+
+
+def _lose(ds: DamageState, rate: Damage, dt) -> DamageState:
+  """One substep at damage ``rate`` (f32[L] per model, health per τ): health integrated, the step's sums grown."""
+  lost = jax.tree.map(lambda r: jnp.maximum(r, 0.0) * (dt / ds.params.tau), rate)
+  return ds.replace(link_health=H.integrate(ds.link_health, rate.total(), dt, ds.params.tau),
+                    step_damage=jax.tree.map(jnp.add, ds.step_damage, lost))
 
 
 def apply_recorded_substeps(ds: DamageState, signals: LinkSignals, dt) -> DamageState:
@@ -105,19 +106,10 @@ def apply_recorded_substeps(ds: DamageState, signals: LinkSignals, dt) -> Damage
   result equals S ``apply_signals`` calls. The signals must not depend on the health they change
   (true of contact forces, accelerations and a temperature or exposure held over the step).
   """
-  ev = jax.vmap(evaluate, in_axes=(0, None))(signals, ds.params)
-  rate, total = ev.rate, ev.rate.total()  # f32[S, L] per model, and summed
-
-  def body(carry, s):
-    health, step_damage = carry
-    lost = jax.tree.map(lambda r: jnp.maximum(r[s], 0.0) * (dt / ds.params.tau), rate)
-    return (H.integrate(health, total[s], dt, ds.params.tau), jax.tree.map(jnp.add, step_damage, lost)), None
-
+  ev = jax.vmap(evaluate, in_axes=(0, None))(signals, ds.params)  # rates f32[S, L] per model
   # unrolled: S is small and static, and XLA:CPU pays per loop iteration for each of these tiny ops
-  (health, step_damage), _ = jax.lax.scan(body, (ds.link_health, ds.step_damage), jnp.arange(total.shape[0]),
-                                          unroll=True)
-  return ds.replace(link_health=health, step_damage=step_damage,
-                    f_par=jnp.maximum(ds.f_par, jnp.max(ev.f_par, axis=0)),
+  ds, _ = jax.lax.scan(lambda ds, rate: (_lose(ds, rate, dt), None), ds, ev.rate, unroll=True)
+  return ds.replace(f_par=jnp.maximum(ds.f_par, jnp.max(ev.f_par, axis=0)),
                     f_perp=jnp.maximum(ds.f_perp, jnp.max(ev.f_perp, axis=0)))
 
 

@@ -18,7 +18,7 @@ import os
 import mujoco
 
 import tasks
-from mjx_damage.native_batch import DEFAULT_SLOTS, NativeBatchEnv
+from mjx_damage.native_batch import DEFAULT_SLOTS, NativeBatchEnv, refusal
 from tasks import bench_table, drop
 from tasks.base import Task
 
@@ -50,7 +50,7 @@ def supports(env) -> bool:
   task = getattr(env, "unwrapped", env)
   binding = getattr(task, "damage_binding", None)
   return (isinstance(task, (Task, drop.DropEnv, bench_table.TableEnv)) and binding is not None
-          and binding.thermal is None and binding.liquid is None)
+          and refusal(binding) is None)
 
 
 def wrap(env, num_envs: int, nthread: int = 0, slots: int = DEFAULT_SLOTS) -> NativeBatchEnv:
