@@ -80,7 +80,9 @@ def parse(argv=None):
                  help="after the last repeat, time one iteration split into rollout and update (train(profile=True)): "
                       "where the scaling is lost")
   p.add_argument("--parts", default="eval,train", help="what to time: eval, train or both (comma-separated)")
-  p.add_argument("--append", action="store_true", help="keep the other device counts' rows of an earlier results file")
+  p.add_argument("--append", action="store_true",
+                 help="merge into an earlier results file: keep its other device counts, and the parts of these "
+                      "device counts that this call does not time (each part records its own command)")
   args = p.parse_args(argv)
   if args.repeats < 2:
     p.error("--repeats: at least 2 (the spread over repeats is reported)")
@@ -114,7 +116,8 @@ def stats(values: list) -> dict:
   return {"runs": values, "mean": sum(values) / len(values), "min": min(values), "max": max(values)}
 
 
-def train_runs(args, d: int) -> dict:
+def train_runs(args, d: int, save=lambda part: None) -> dict:
+  """Training rates of ``args.repeats`` runs on ``d`` devices; ``save`` gets the part after every repeat."""
   from train.config import PPOConfig
   from train.ppo import train
 
@@ -138,15 +141,16 @@ def train_runs(args, d: int) -> dict:
                for row in res.history]
     print(f"train D={d} repeat {r}: {res.throughput:,.0f} env-steps/s ({res.iterations} iterations, "
           f"compile {res.timings['compile']:.1f} s)", flush=True)
-  out = {"config": {k: v for k, v in res.config.to_json().items() if k != "num_timesteps"},
-         "env_steps_per_s": stats(rates), "first_iteration_s": compiles, "curve": curve}
+    out = {"config": {k: v for k, v in res.config.to_json().items() if k != "num_timesteps"},
+           "env_steps_per_s": stats(rates), "first_iteration_s": compiles, "curve": curve}
+    save(out)  # a time limit keeps the finished repeats (the rate's "runs" says how many)
   if args.profile:  # s per iteration, all seeds: rollout (env step + inference) vs update (SGD incl. all-reduces)
     out["profile"] = {k.split("/")[1]: v for k, v in res.timings.items() if k.startswith("profile/")}
     print(f"train D={d} profile: " + ", ".join(f"{k} {v:.3f} s" for k, v in out["profile"].items()), flush=True)
   return out
 
 
-def eval_runs(args, d: int) -> dict:
+def eval_runs(args, d: int, save=lambda part: None) -> dict:
   import jax
   import numpy as np
 
@@ -185,7 +189,9 @@ def write(base: str, payload: dict) -> None:
     speed = f" | {s['mean'] / one[part]['env_steps_per_s']['mean']:.2f}x" if one and part in one else " | –"
     return f"{s['mean']:,.0f} ({s['min']:,.0f}–{s['max']:,.0f}){speed}"
 
-  commands = "; ".join(f"`{c}`" for c in dict.fromkeys(r["command"] for r in rows))
+  # Older files kept one command per row; newer ones one per timed part (a train call and an eval call merged).
+  commands = "; ".join(f"`{c}`" for c in dict.fromkeys(
+      r[k].get("command", r.get("command")) for r in rows for k in ("train", "eval") if k in r))
   lines = [f"# Scaling over devices: {payload['device']}", "",
            f"Command(s): {commands}", "", f"jax {payload['jax']}, {payload['date']}; task {payload['task']}; "
            f"rates are mean (min–max) over {payload['repeats']} repeats; speedup vs 1 device at the same per-device batch.",
@@ -248,17 +254,24 @@ def main(argv=None) -> int:
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/multi_gpu.py"] + list(sys.argv[1:] if argv is None else argv))
   payload = {"device": device, "jax": jax.__version__, "task": args.task, "repeats": args.repeats,
              "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
+  earlier = {}
   if args.append and os.path.exists(base + ".json"):
     with open(base + ".json") as f:
-      payload["rows"] = [r for r in json.load(f)["rows"] if r["devices"] not in counts]
+      earlier = {r["devices"]: r for r in json.load(f)["rows"]}
+    payload["rows"] = [r for d, r in earlier.items() if d not in counts]
   for d in counts:
-    row = {"devices": d, "command": command}
-    for part, run in (("eval", eval_runs), ("train", train_runs)):
-      if part in args.parts:
-        row[part] = run(args, d)
+    row = {k: v for k, v in earlier.get(d, {}).items() if k in ("eval", "train")}
+    row["devices"] = d
     payload["rows"].append(row)
     payload["rows"].sort(key=lambda r: r["devices"])
-    write(base, payload)  # after every device count: a timeout keeps the finished ones
+    for part, run in (("eval", eval_runs), ("train", train_runs)):
+      if part in args.parts:
+
+        def save(result, part=part):
+          row[part] = dict(result, command=command)
+          write(base, payload)
+
+        save(run(args, d, save))
   print(f"wrote {base}.md / .json / _curves.png", flush=True)
   return 0
 

@@ -292,3 +292,44 @@ def test_multi_gpu_benchmark_refuses_bad_parts(parts, capsys):
     mg.parse(["--parts", parts])
   assert e.value.code == 2 and "--parts" in capsys.readouterr().err
   assert mg.parse(["--parts", "train"]).parts == ["train"]
+
+
+def test_multi_gpu_append_merges_a_train_call_and_an_eval_call(tmp_path, monkeypatch):
+  """A training-only call and an evaluation-only call (e.g. two device calls under a time limit) end in one
+  row per device count, each part with its own command; a call's own parts replace the earlier ones."""
+  mg = load_benchmark("multi_gpu")
+  rate = lambda v: {"runs": [v], "mean": v, "min": v, "max": v}
+  monkeypatch.setattr(mg, "train_runs", lambda args, d, save: {"config": {"num_envs": 8 * d}, "curve": [],
+                                                               "env_steps_per_s": rate(100.0 * d)})
+  monkeypatch.setattr(mg, "eval_runs", lambda args, d, save: {"episodes": 4 * d, "env_steps_per_s": rate(50.0 * d)})
+  base = ["--devices", "1", "--results-dir", str(tmp_path)]
+  assert mg.main(base + ["--parts", "train"]) == 0
+  assert mg.main(base + ["--parts", "eval", "--append"]) == 0
+  rows = json.load(open(tmp_path / "multi_gpu_cpu.json"))["rows"]
+  assert len(rows) == 1 and rows[0]["train"]["env_steps_per_s"]["mean"] == 100.0
+  assert rows[0]["eval"]["env_steps_per_s"]["mean"] == 50.0
+  assert "--parts train" in rows[0]["train"]["command"] and "--parts eval" in rows[0]["eval"]["command"]
+  md = open(tmp_path / "multi_gpu_cpu.md").read()
+  assert "--parts train" in md and "--parts eval" in md and "| 1 | 8 | 100 (100–100)" in md
+  monkeypatch.setattr(mg, "eval_runs", lambda args, d, save: {"episodes": 4 * d, "env_steps_per_s": rate(70.0 * d)})
+  assert mg.main(base + ["--parts", "eval", "--append"]) == 0
+  rows = json.load(open(tmp_path / "multi_gpu_cpu.json"))["rows"]
+  assert rows[0]["eval"]["env_steps_per_s"]["mean"] == 70.0 and rows[0]["train"]["env_steps_per_s"]["mean"] == 100.0
+  assert mg.main(base + ["--parts", "eval"]) == 0  # without --append a call starts the file afresh
+  assert "train" not in json.load(open(tmp_path / "multi_gpu_cpu.json"))["rows"][0]
+
+
+def test_multi_gpu_keeps_the_finished_repeats_when_a_time_limit_ends_the_run(tmp_path, monkeypatch):
+  """A device call's time limit (SIGTERM) mid-run must not lose the repeats already timed."""
+  mg = load_benchmark("multi_gpu")
+
+  def cut_short(args, d, save):
+    save({"config": {"num_envs": 8}, "curve": [], "env_steps_per_s": {"runs": [123.0], "mean": 123.0,
+                                                                       "min": 123.0, "max": 123.0}})
+    raise SystemExit(124)  # the second repeat never finishes
+
+  monkeypatch.setattr(mg, "train_runs", cut_short)
+  with pytest.raises(SystemExit):
+    mg.main(["--devices", "1", "--parts", "train", "--results-dir", str(tmp_path)])
+  row, = json.load(open(tmp_path / "multi_gpu_cpu.json"))["rows"]
+  assert row["devices"] == 1 and row["train"]["env_steps_per_s"]["runs"] == [123.0]
