@@ -239,6 +239,39 @@ def markdown(record: dict) -> str:
   return "\n".join(lines) + "\n"
 
 
+
+def write(stem: str, a, argv, device, rows: list, old) -> None:
+  """Results so far into ``stem``.json/.md, merged with an earlier file of the same setting (rows replaced by key)."""
+  import jax
+
+  from mjx_damage import io
+
+  record = {
+      "benchmark": "step_overhead",
+      "command": " ".join(shlex.quote(x) for x in [sys.executable, *(sys.argv if argv is None else ["benchmarks/step_overhead.py", *argv])]),
+      "timestamp_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ"),
+      "device": f"{device.platform}:{device.device_kind}",
+      "host": platform.node(),
+      "cpu_count": os.cpu_count(),
+      "jax": jax.__version__,
+      "envs": a.envs,
+      "steps": a.steps,
+      "repeats": a.repeats,
+      "policy": a.policy,
+      "clock": a.clock,
+      "results": summarise(rows),
+  }
+  record["commands"] = [record["command"]]
+  if old is not None and all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy", "clock")):
+    key = lambda r: (r["task"], r.get("robot", "gripper"), r["variant"])  # noqa: E731
+    new = {key(r) for r in rows}
+    kept = [r for r in old["results"] if key(r) not in new]
+    record["results"] = summarise(kept + rows)
+    record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
+  io.write_json(stem + ".json", record)
+  io.write_text(stem + ".md", markdown(record))
+
+
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--tasks", default="place_plate,shelve_item,pour_water")
@@ -282,8 +315,6 @@ def main(argv=None) -> int:
   os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(HERE, "..", ".jax_cache"))
   import jax
 
-  from mjx_damage import io
-
   probes = {n: tasks.make(n, robot=a.robot or tasks.robots.DEFAULT).unwrapped for n in names}
   pairs = [(n, v) for n in names for v in variants if applicable(probes[n], v)]
   clock = time.perf_counter if a.clock == "wall" else time.process_time
@@ -293,36 +324,16 @@ def main(argv=None) -> int:
     return 0
   if a.precompile_workers:
     precompile(argv if argv is not None else sys.argv[1:], pairs, a.precompile_workers)
-  rows = [measure(n, v, a.envs, a.steps, a.repeats, a.policy, clock, a.robot) for n, v in pairs]
   device = jax.devices()[0]
-  record = {
-      "benchmark": "step_overhead",
-      "command": " ".join(shlex.quote(x) for x in [sys.executable, *(sys.argv if argv is None else ["benchmarks/step_overhead.py", *argv])]),
-      "timestamp_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ"),
-      "device": f"{device.platform}:{device.device_kind}",
-      "host": platform.node(),
-      "cpu_count": os.cpu_count(),
-      "jax": jax.__version__,
-      "envs": a.envs,
-      "steps": a.steps,
-      "repeats": a.repeats,
-      "policy": a.policy,
-      "clock": a.clock,
-      "results": summarise(rows),
-  }
   stem = os.path.join(a.out_dir, f"step_overhead_{device.platform}")
-  record["commands"] = [record["command"]]
+  old = None
   if os.path.exists(stem + ".json"):
     with open(stem + ".json") as f:
       old = json.load(f)
-    if all(old.get(k) == record[k] for k in ("device", "envs", "steps", "policy", "clock")):
-      key = lambda r: (r["task"], r.get("robot", "gripper"), r["variant"])  # noqa: E731
-      new = {key(r) for r in rows}
-      kept = [r for r in old["results"] if key(r) not in new]
-      record["results"] = summarise(kept + rows)
-      record["commands"] = [c for c in old.get("commands", [old["command"]]) if c != record["command"]] + record["commands"]
-  io.write_json(stem + ".json", record)
-  io.write_text(stem + ".md", markdown(record))
+  rows = []
+  for n, v in pairs:
+    rows.append(measure(n, v, a.envs, a.steps, a.repeats, a.policy, clock, a.robot))
+    write(stem, a, argv, device, rows, old)  # after every row: a time limit keeps what was measured
   print(f"wrote {stem}.json, {stem}.md")
   return 0
 
