@@ -256,29 +256,49 @@ def append(path: str, ds: Dataset) -> None:
 
 def _write_demos(g, ds: Dataset, start: int) -> None:
   total = int(g.attrs["total"])
+  ids = {}  # one HDF5 type per dtype and one dataspace per shape, shared by every object written
+  label = [np.asarray(n, dtype=_STR) for n in ds.label_names]
   for i in range(ds.num_episodes):
     n = int(ds.lengths[i])
-    d = g.create_group(f"demo_{start + i}")
-    d.attrs["num_samples"] = n
-    d.attrs["success"] = bool(ds.success[i])
-    d.attrs["safe"] = bool(ds.safe[i])
-    d.attrs["label"] = ds.label_names[int(ds.labels[i])] if len(ds.label_names) else ""
+    d = h5py.h5g.create(g.id, f"demo_{start + i}".encode())
+    _attr(ids, d, b"num_samples", np.asarray(n, np.int64))
+    _attr(ids, d, b"success", np.asarray(bool(ds.success[i])))
+    _attr(ids, d, b"safe", np.asarray(bool(ds.safe[i])))
+    _attr(ids, d, b"label", label[int(ds.labels[i])] if label else np.asarray("", dtype=_STR))
     for k in _STEP_ARRAYS:
-      _put(d, k, getattr(ds, k)[i, :n])
+      _put(ids, d, k.encode(), getattr(ds, k)[i, :n])
     for sub in ("obs", "health", "damage"):
-      s = d.create_group(sub)
+      s = h5py.h5g.create(d, sub.encode())
       for k, v in getattr(ds, sub).items():
-        _put(s, k, v[i, :n])
+        _put(ids, s, k.encode(), v[i, :n])
     total += n
   g.attrs["total"] = total
 
 
-def _put(group, name: str, a: np.ndarray) -> None:
-  """A contiguous dataset ``group/name`` holding ``a``, through h5py's low-level API: the
-  high-level ``create_dataset`` costs ~1.5× more per call, and a file holds ~15 per episode."""
+# The writers use h5py's low-level API with shared type and dataspace ids: a file holds ~20 objects per
+# episode, and h5py's high-level wrappers (plus a fresh type and dataspace per object) cost about as much
+# as HDF5 itself (2.66 s vs 4.3 s for 4096 pick_egg episodes). They write what the high-level API writes
+# (same types, contiguous layout), so readers see no difference.
+_STR = h5py.string_dtype()  # variable-length UTF-8, as h5py stores a Python str attribute
+
+
+def _type_space(ids: dict, dtype, shape):
+  key = (dtype, shape)
+  if key not in ids:
+    space = h5py.h5s.create_simple(shape) if shape else h5py.h5s.create(h5py.h5s.SCALAR)
+    ids[key] = (h5py.h5t.py_create(dtype, logical=True), space)
+  return ids[key]
+
+
+def _attr(ids: dict, obj, name: bytes, a: np.ndarray) -> None:
+  """A scalar attribute ``name`` of ``obj`` (a low-level object id) holding ``a``."""
+  h5py.h5a.create(obj, name, *_type_space(ids, a.dtype, ())).write(a)
+
+
+def _put(ids: dict, group, name: bytes, a: np.ndarray) -> None:
+  """A contiguous dataset ``group/name`` holding ``a`` (``group``: a low-level group id)."""
   a = np.ascontiguousarray(a)
-  space = h5py.h5s.create_simple(a.shape) if a.ndim else h5py.h5s.create(h5py.h5s.SCALAR)
-  dset = h5py.h5d.create(group.id, name.encode(), h5py.h5t.py_create(a.dtype, logical=True), space)
+  dset = h5py.h5d.create(group, name, *_type_space(ids, a.dtype, a.shape))
   if a.size:
     dset.write(h5py.h5s.ALL, h5py.h5s.ALL, a)
 

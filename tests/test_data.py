@@ -63,6 +63,10 @@ def test_file_is_robomimic_layout(tmp_path):
     assert demo["actions"].shape == (n, 4) and demo["obs/state"].shape == (n, 6)
     assert demo["dones"][-1] == 1 and demo["dones"][:-1].sum() == 0
     assert set(demo["damage"]) == set(D.DAMAGE_KINDS) and set(demo["health"]) == {"egg", "agent"}
+    # written through h5py's low-level API, read back as the high-level API would have stored them
+    assert isinstance(demo.attrs["label"], str) and demo.attrs["label"] == ds.label_names[int(ds.labels[1])]
+    assert type(demo.attrs["success"]) is np.bool_ and type(demo.attrs["num_samples"]) is np.int64
+    assert demo["actions"].dtype == np.float32 and demo["actions"].chunks is None  # contiguous
 
 
 def test_append_and_concat_agree(tmp_path):
