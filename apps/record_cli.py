@@ -76,7 +76,7 @@ def main(argv=None) -> int:
   import numpy as np
 
   from mjx_damage import data as D
-  from train.record import record
+  from train.record import record_chunks
 
   out = args.out or os.path.join(outputs.run_dir("record", args.task), "demos.hdf5")
   env = R.make_task(args.task)
@@ -85,20 +85,28 @@ def main(argv=None) -> int:
   print(f"record: task {args.task}, policy {args.policy}, {args.episodes} episodes, device {platform}; "
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
+  flags = []  # per chunk: success, safe (episode flags), transitions
+
+  def counted(chunks):
+    for ds in chunks:
+      flags.append((ds.success, ds.safe, D.num_transitions(ds)))
+      yield ds
+
   t0 = time.perf_counter()
   with heartbeat("record"):
-    ds = record(env, policy, args.episodes, args.seed, task=args.task,
-                episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
-                label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))
-  rec_s = time.perf_counter() - t0
-  D.save(out, ds, overwrite=args.overwrite)
+    # each chunk is written while the device records the next one
+    D.save_chunks(out, counted(record_chunks(
+        env, policy, args.episodes, args.seed, task=args.task,
+        episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
+        label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))), overwrite=args.overwrite)
   total_s = time.perf_counter() - t0
-  n = D.num_transitions(ds)
-  print(json.dumps({"out": out, "episodes": ds.num_episodes, "transitions": n,
-                    "success_rate": float(np.mean(ds.success)), "safe_rate": float(np.mean(ds.safe)),
-                    "safe_success_rate": float(np.mean(ds.success & ds.safe)),
-                    "record_s_incl_compile": round(rec_s, 2), "save_s": round(total_s - rec_s, 2),
-                    "total_s": round(total_s, 2), "transitions_per_s": round(n / total_s, 1)}))
+  success = np.concatenate([f[0] for f in flags])
+  safe = np.concatenate([f[1] for f in flags])
+  n = sum(f[2] for f in flags)
+  print(json.dumps({"out": out, "episodes": int(success.size), "transitions": n,
+                    "success_rate": float(np.mean(success)), "safe_rate": float(np.mean(safe)),
+                    "safe_success_rate": float(np.mean(success & safe)),
+                    "total_s_incl_compile": round(total_s, 2), "transitions_per_s": round(n / total_s, 1)}))
   print(f"outputs: {out}")
   return 0
 

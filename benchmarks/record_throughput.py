@@ -9,8 +9,14 @@ Two measurements per task, both with an operator of :mod:`tasks.operators`
   256 episodes in ≤ 2 minutes);
 * **steady state** — ``--steady-episodes`` episodes in chunks of ``--chunk``
   (one executable), then written. The first chunk, which compiles, is left out;
-  transitions per second recorded, written, and both (``1 / (1/r + 1/w)``: what
-  a long recording sustains; target on one H100: ≥ 100 k transitions/s).
+  transitions per second recorded, written, and both (``1 / (1/r + 1/w)``: one
+  after the other);
+* **streamed** — what ``mjx-damage record`` does: the same episodes through
+  :func:`train.record.record_chunks` into :func:`mjx_damage.data.save_chunks`,
+  each chunk written while the device records the next. Rate = transitions of
+  chunks 2..N / time from chunk 1's arrival to the file's close (which includes
+  writing chunk 1: slightly conservative). Target on one H100: ≥ 100 k
+  transitions/s recorded and written.
 
 Results: ``benchmarks/results/record_throughput_<device>.{json,md}``.
 
@@ -46,7 +52,7 @@ from mjx_damage.io import write_json, write_text  # noqa: E402
 from mjx_damage.runtime import device_info  # noqa: E402
 from tasks import operators  # noqa: E402
 from train import evaluate as E  # noqa: E402
-from train.record import record  # noqa: E402
+from train.record import record, record_chunks  # noqa: E402
 
 
 def timed_record(env, op, task: str, episodes: int, chunk: int, seed: int, path: str) -> dict:
@@ -67,6 +73,24 @@ def timed_record(env, op, task: str, episodes: int, chunk: int, seed: int, path:
           "record_s": t1 - t0, "save_s": t2 - t1, "total_s": t2 - t0, "chunk_s": chunk_s,
           "file_mb": os.path.getsize(path) / 2**20, "success": float(np.mean(ds.success)),
           "safe": float(np.mean(ds.safe))}
+
+
+def timed_stream(env, op, task: str, episodes: int, chunk: int, seed: int, path: str) -> dict:
+  """Record and write at once (``mjx-damage record``'s path); the steady rate after the first chunk."""
+  marks, sizes = [], []
+
+  def stamped(chunks):
+    for ds in chunks:
+      marks.append(time.perf_counter())
+      sizes.append(D.num_transitions(ds))
+      yield ds
+
+  t0 = time.perf_counter()
+  D.save_chunks(path, stamped(record_chunks(env, op, episodes, seed, task=task,
+                                            episode_length=E.env_episode_length(env), chunk=chunk)))
+  t1 = time.perf_counter()
+  return {"episodes": episodes, "chunk": min(chunk, episodes), "total_s": t1 - t0,
+          "first_chunk_s": marks[0] - t0, "transitions_per_s": sum(sizes[1:]) / (t1 - marks[0])}
 
 
 def main(argv=None) -> int:
@@ -102,12 +126,13 @@ def main(argv=None) -> int:
       per_chunk = steady["chunk"] * E.env_episode_length(env)
       rec_tps = per_chunk * (len(steady["chunk_s"]) - 1) / sum(steady["chunk_s"][1:])
       save_tps = steady["transitions"] / steady["save_s"]
+      stream = timed_stream(env, op, task, args.steady_episodes, args.chunk, 1, os.path.join(tmp, f"{task}_c.hdf5"))
       rows.append({"task": task, "episode_length": E.env_episode_length(env), "scratch": scratch,
                    "steady": steady, "record_transitions_per_s": rec_tps, "save_transitions_per_s": save_tps,
-                   "written_transitions_per_s": 1.0 / (1.0 / rec_tps + 1.0 / save_tps)})
+                   "written_transitions_per_s": 1.0 / (1.0 / rec_tps + 1.0 / save_tps), "streamed": stream})
       print(f"{task}: {args.episodes} episodes from scratch in {scratch['total_s']:.1f} s; steady "
             f"{rec_tps:,.0f} recorded, {save_tps:,.0f} written, {rows[-1]['written_transitions_per_s']:,.0f} "
-            "both (transitions/s)", flush=True)
+            f"both, {stream['transitions_per_s']:,.0f} streamed (transitions/s)", flush=True)
 
   cmd = "python benchmarks/record_throughput.py " + " ".join(
       shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
@@ -122,17 +147,20 @@ def main(argv=None) -> int:
            f"Operator `{args.operator}` through `train.record.record` (one compiled `jit(vmap(episode))` per "
            "chunk), written by `mjx_damage.data.save` (robomimic HDF5 layout + health, damage, cost). "
            "From scratch: one call, compilation included (what `mjx-damage record` takes). Steady state: "
-           "chunks after the first (which compiles); 'both' = 1 / (1/recorded + 1/written). Persistent "
+           "chunks after the first (which compiles); 'both' = 1 / (1/recorded + 1/written); 'streamed' = "
+           "recorded and written at once, each chunk written while the device records the next (what "
+           "`mjx-damage record` does; chunks after the first). Persistent "
            f"compilation cache: {'on (' + cache + '; a warm cache skips compiling)' if cache else 'off (every run compiles)'}.",
            "",
            "| task | T | from scratch: episodes | s (compile incl.) | of it writing s | file MB | "
-           "steady: episodes × chunk | recorded tr/s | written tr/s | both tr/s |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "steady: episodes × chunk | recorded tr/s | written tr/s | both tr/s | streamed tr/s |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
   for r in rows:
     a, b = r["scratch"], r["steady"]
     lines.append(f"| {r['task']} | {r['episode_length']} | {a['episodes']} | {a['total_s']:.1f} | {a['save_s']:.1f} | "
                  f"{a['file_mb']:.0f} | {b['episodes']} × {b['chunk']} | {r['record_transitions_per_s']:,.0f} | "
-                 f"{r['save_transitions_per_s']:,.0f} | {r['written_transitions_per_s']:,.0f} |")
+                 f"{r['save_transitions_per_s']:,.0f} | {r['written_transitions_per_s']:,.0f} | "
+                 f"{r['streamed']['transitions_per_s']:,.0f} |")
   write_text(base + ".md", "\n".join(lines) + "\n")
   print("\n".join(lines))
   print(f"wrote {base}.json, {base}.md")

@@ -19,6 +19,10 @@ In memory: :class:`Dataset`, a pytree of arrays padded to ``[E, T, ...]`` with
 ``lengths`` and ``keep`` (False past an episode's end), so curation and
 training are array operations; :func:`transitions` flattens the kept steps.
 
+:func:`save_chunks` writes a stream of datasets (``train.record.record_chunks``) as one
+file, chunk by chunk, so a recording larger than memory can be written while it
+is recorded.
+
 Every function here that touches a file raises ``ValueError`` naming the file
 and the cause (missing, not HDF5 / truncated, wrong layout, missing key,
 another task) before returning anything. Writes are atomic
@@ -30,7 +34,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from typing import Optional, Sequence
+from typing import Iterable, Optional, Sequence
 
 import flax
 import h5py
@@ -220,22 +224,46 @@ def transitions(ds: Dataset) -> dict:
 
 def save(path: str, ds: Dataset, overwrite: bool = False) -> None:
   """Write ``ds`` to ``path`` (atomic). Refuses an existing file unless ``overwrite``."""
+  save_chunks(path, [ds], overwrite)
+
+
+def save_chunks(path: str, chunks: Iterable[Dataset], overwrite: bool = False) -> int:
+  """Write the episodes of a stream of datasets of one task to ``path`` as one file, chunk by chunk.
+
+  Each chunk is written as it arrives (with :func:`train.record.record_chunks`,
+  while the device records the next), so the episodes never need to fit in
+  memory together. Atomic: nothing at ``path`` until the last chunk is written;
+  an error or an interruption leaves an existing file as it was. Refuses an
+  existing file unless ``overwrite``. Returns the number of episodes written.
+  """
   path = os.fspath(path)
   if os.path.exists(path) and not overwrite:
     raise ValueError(f"{path}: exists; pass overwrite=True (CLI: --overwrite) to replace it")
-  ds = to_numpy(ds)
-  _check_self(ds)
+  first, written = None, 0
   with atomic_path(path, suffix=".hdf5") as tmp:
     with h5py.File(tmp, "w") as f:
-      g = f.create_group("data")
-      g.attrs["env_name"] = ds.env_name
-      g.attrs["env_args"] = json.dumps({"env_name": ds.env_name, "type": "mjx_damage",
-                                        "env_kwargs": json.loads(ds.env_config)})
-      g.attrs["format"] = FORMAT
-      g.attrs["entity_names"] = json.dumps(list(ds.entity_names))
-      g.attrs["labels"] = json.dumps(list(ds.label_names))
-      g.attrs["total"] = 0
-      _write_demos(g, ds, start=0)
+      for ds in chunks:
+        ds = to_numpy(ds)
+        _check_self(ds)
+        if first is None:
+          first = ds
+          g = f.create_group("data")
+          g.attrs["env_name"] = ds.env_name
+          g.attrs["env_args"] = json.dumps({"env_name": ds.env_name, "type": "mjx_damage",
+                                            "env_kwargs": json.loads(ds.env_config)})
+          g.attrs["format"] = FORMAT
+          g.attrs["entity_names"] = json.dumps(list(ds.entity_names))
+          g.attrs["total"] = 0
+          names = ()
+        else:
+          _check_compatible(first, ds, "chunks")
+        names = tuple(dict.fromkeys(names + ds.label_names))
+        g.attrs["labels"] = json.dumps(list(names))
+        _write_demos(g, ds, start=written)
+        written += ds.num_episodes
+      if first is None:
+        raise ValueError("dataset: no episodes")
+  return written
 
 
 def append(path: str, ds: Dataset) -> None:
@@ -255,6 +283,7 @@ def append(path: str, ds: Dataset) -> None:
 
 
 def _write_demos(g, ds: Dataset, start: int) -> None:
+  """Episodes of ``ds`` as ``demo_<start + i>``, each labelled by name (``data.attrs["labels"]`` lists them)."""
   total = int(g.attrs["total"])
   ids = {}  # one HDF5 type per dtype and one dataspace per shape, shared by every object written
   label = [np.asarray(n, dtype=_STR) for n in ds.label_names]

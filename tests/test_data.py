@@ -151,3 +151,29 @@ def test_build_checks_shapes():
     D.build(env_name="x", obs={"state": ds.obs["state"][:, :3]}, actions=ds.actions, rewards=ds.rewards,
             states=ds.states, health=ds.health, damage=ds.damage, cost=ds.cost, lengths=ds.lengths,
             success=ds.success, safe=ds.safe)
+
+
+def test_save_chunks_equals_save_of_the_concatenation(tmp_path):
+  a, b = hand_made(e=4, t=7, seed=3), hand_made(e=3, t=7, seed=4, labels=("careless", "other"))
+  D.save_chunks(tmp_path / "streamed.hdf5", iter([a, b]))
+  D.save(tmp_path / "whole.hdf5", D.concat([a, b]))
+  assert_same(D.load(tmp_path / "streamed.hdf5"), D.load(tmp_path / "whole.hdf5"))
+
+
+def test_save_chunks_refuses_a_mismatched_chunk_and_keeps_the_old_file(tmp_path):
+  path = tmp_path / "demos.hdf5"
+  path.write_bytes(b"keep me")
+  with pytest.raises(ValueError, match="datasets of different tasks"):
+    D.save_chunks(path, iter([hand_made(), hand_made(env_name="pour_water")]), overwrite=True)
+  assert path.read_bytes() == b"keep me"
+
+  def interrupted():  # e.g. Ctrl-C while the device records the second chunk
+    yield hand_made()
+    raise KeyboardInterrupt
+
+  with pytest.raises(KeyboardInterrupt):
+    D.save_chunks(path, interrupted(), overwrite=True)
+  assert path.read_bytes() == b"keep me" and [p.name for p in tmp_path.iterdir()] == ["demos.hdf5"]
+  with pytest.raises(ValueError, match="no episodes"):
+    D.save_chunks(tmp_path / "empty.hdf5", iter([]))
+  assert not (tmp_path / "empty.hdf5").exists()

@@ -46,3 +46,26 @@ def test_record_operators_round_trip(tmp_path):
   back = D.load(tmp_path / "d.hdf5", task="pick_egg")
   np.testing.assert_array_equal(back.actions, ds.actions)
   assert back.label_names == ("careless",)
+
+
+def test_cli_streams_chunks_into_the_file_as_record_would_hold_them(tmp_path, capsys):
+  """`mjx-damage record` writes each chunk while the next records (record_chunks → save_chunks): the file
+  must hold what record() gives in memory for the same seed, the last chunk shorter."""
+  import json
+
+  import tasks
+  from tasks import operators
+
+  out = tmp_path / "demos.hdf5"
+  rc = cli.main(["record", "--task", "pick_egg", "--policy", "operator:careful", "--episodes", "5", "--chunk", "3",
+                 "--episode-length", "12", "--seed", "7", "--out", str(out)])
+  assert rc == 0
+  summary = json.loads([ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("{")][-1])
+  assert summary["episodes"] == 5 and summary["transitions"] == 5 * 12
+  env = tasks.make("pick_egg")
+  whole = R.record(env, operators.careful(env), 5, seed=7, task="pick_egg", episode_length=12, chunk=5,
+                   label="careful")
+  back = D.load(out, task="pick_egg")
+  for f in ("actions", "rewards", "states", "cost", "success", "safe", "lengths"):
+    np.testing.assert_allclose(getattr(back, f), getattr(whole, f), rtol=1e-5, atol=1e-5, err_msg=f)
+  assert back.label_names == ("careful",) and summary["success_rate"] == float(np.mean(whole.success))

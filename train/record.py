@@ -25,7 +25,7 @@ task and policy names.
 from __future__ import annotations
 
 import time
-from typing import Optional
+from typing import Iterator, Optional
 
 import jax
 import jax.numpy as jnp
@@ -73,15 +73,14 @@ def episode_fn(env, op: operators.Operator, episode_length: int):
   return episode
 
 
-def record(env, policy, episodes: int, seed: int = 0, *, task: str, episode_length: Optional[int] = None,
-           chunk: int = DEFAULT_CHUNK, label: Optional[str] = None, env_config: Optional[dict] = None,
-           log=None) -> D.Dataset:
-  """Record ``episodes`` episodes of ``policy`` (``policy(state, rng)`` or an Operator) on ``env``.
+def record_chunks(env, policy, episodes: int, seed: int = 0, *, task: str, episode_length: Optional[int] = None,
+                  chunk: int = DEFAULT_CHUNK, label: Optional[str] = None, env_config: Optional[dict] = None,
+                  log=None) -> Iterator[D.Dataset]:
+  """:func:`record`'s episodes as a stream of datasets of ``chunk`` episodes (the last one shorter).
 
-  ``task``: the task name stored in the dataset; ``env_config``: the make()
-  overrides that built ``env`` (stored as JSON); ``label``: the operator
-  condition stored per episode (default: the operator's label). Episode i uses
-  key ``split(PRNGKey(seed), episodes)[i]``.
+  The next chunk is dispatched to the device before this one is handed out, so
+  whatever the caller does with a chunk (write it: :func:`mjx_damage.data.save_chunks`)
+  overlaps the recording of the next. Same episodes, keys and values as :func:`record`.
   """
   for name, v in (("episodes", episodes), ("chunk", chunk)):
     if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -94,18 +93,37 @@ def record(env, policy, episodes: int, seed: int = 0, *, task: str, episode_leng
   keys = np.asarray(jax.random.split(jax.random.PRNGKey(seed), episodes))
   pad = (-episodes) % chunk
   keys = np.concatenate([keys, np.repeat(keys[-1:], pad, 0)]) if pad else keys
-  parts = []
-  for i in range(0, keys.shape[0], chunk):
-    t0 = time.perf_counter()
-    parts.append(jax.tree.map(np.asarray, jax.block_until_ready(run(keys[i : i + chunk]))))
+  starts = range(0, keys.shape[0], chunk)
+  t0 = time.perf_counter()
+  pending = run(keys[:chunk])
+  for i in starts:
+    nxt = run(keys[i + chunk : i + 2 * chunk]) if i + chunk < keys.shape[0] else None  # asynchronous dispatch
+    n = min(chunk, episodes - i)
+    steps, success, final_h = jax.tree.map(lambda a: np.asarray(a)[:n], pending)  # waits for chunk i only
     if log:
-      log(f"recorded episodes {i}..{min(i + chunk, episodes) - 1} in {time.perf_counter() - t0:.1f} s")
-  steps, success, final_h = jax.tree.map(lambda *xs: np.concatenate(xs)[:episodes], *parts)
-  names = env.entity_names
-  return D.build(
-      env_name=task, env_config=env_config or {}, obs={"state": steps["obs"]}, actions=steps["actions"],
-      rewards=steps["rewards"], states=steps["states"],
-      health={n: steps["health"][:, :, i] for i, n in enumerate(names)},
-      damage=steps["damage"], cost=steps["cost"], lengths=np.full(episodes, T),
-      success=success, safe=np.all(final_h > getattr(env, "safe_threshold", 95.0), axis=-1),
-      labels=np.zeros(episodes, np.int32), label_names=(label,))
+      log(f"recorded episodes {i}..{i + n - 1} in {time.perf_counter() - t0:.1f} s")
+    yield D.build(
+        env_name=task, env_config=env_config or {}, obs={"state": steps["obs"]}, actions=steps["actions"],
+        rewards=steps["rewards"], states=steps["states"],
+        health={name: steps["health"][:, :, j] for j, name in enumerate(env.entity_names)},
+        damage=steps["damage"], cost=steps["cost"], lengths=np.full(n, T),
+        success=success, safe=np.all(final_h > getattr(env, "safe_threshold", 95.0), axis=-1),
+        labels=np.zeros(n, np.int32), label_names=(label,))
+    t0, pending = time.perf_counter(), nxt
+
+
+def record(env, policy, episodes: int, seed: int = 0, *, task: str, episode_length: Optional[int] = None,
+           chunk: int = DEFAULT_CHUNK, label: Optional[str] = None, env_config: Optional[dict] = None,
+           log=None) -> D.Dataset:
+  """Record ``episodes`` episodes of ``policy`` (``policy(state, rng)`` or an Operator) on ``env``.
+
+  ``task``: the task name stored in the dataset; ``env_config``: the make()
+  overrides that built ``env`` (stored as JSON); ``label``: the operator
+  condition stored per episode (default: the operator's label). Episode i uses
+  key ``split(PRNGKey(seed), episodes)[i]``. Held in memory; for datasets
+  larger than memory, or to write while recording, stream :func:`record_chunks`
+  into :func:`mjx_damage.data.save_chunks`.
+  """
+  parts = list(record_chunks(env, policy, episodes, seed, task=task, episode_length=episode_length, chunk=chunk,
+                             label=label, env_config=env_config, log=log))
+  return parts[0] if len(parts) == 1 else D.concat(parts)
