@@ -158,9 +158,11 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
       return jax.lax.scan(body, carry, None, length=steps)[0]
 
     carry = (state, jax.random.PRNGKey(1))
+  hits = CACHE_HITS[0]
   t0 = time.perf_counter()
   compiled = jax.jit(run, donate_argnums=0).lower(carry).compile()
   compile_s = time.perf_counter() - t0
+  from_cache = CACHE_HITS[0] > hits
   if compile_only:
     print(f"{name:12s} {variant:15s} compiled in {compile_s:.0f} s", flush=True)
     return None
@@ -173,11 +175,20 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   d = carry[0] if variant.startswith("raw") else carry[0].pipeline_state
   row = {
       "task": name, "robot": robot, "variant": variant, "envs": envs, "steps": steps,
-      "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s,
+      "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s, "from_cache": from_cache,
       "finite": bool(jnp.all(jnp.isfinite(d.qpos))),
   }
-  print(f"{name:12s} {variant:15s} {row['env_steps_per_s']:>12,.0f} env-steps/s  (compile {compile_s:.0f} s)", flush=True)
+  print(f"{name:12s} {variant:15s} {row['env_steps_per_s']:>12,.0f} env-steps/s  (compile {compile_s:.0f} s"
+        f"{', from the cache' if from_cache else ''})", flush=True)
   return row
+
+
+CACHE_HITS = [0]  # persistent-cache hits of this process (jax.monitoring), to tell a cache load from a compile
+
+
+def _count_hit(event: str, **_) -> None:
+  if event == "/jax/compilation_cache/cache_hits":
+    CACHE_HITS[0] += 1
 
 
 def precompile(argv: list[str], pairs: list[tuple[str, str]], workers: int) -> None:
@@ -312,8 +323,16 @@ def main(argv=None) -> int:
     for n in names:
       if a.robot not in tasks.robots_for(n):
         p.error(f"--tasks: {n!r} supports {', '.join(tasks.robots_for(n))} only, not --robot {a.robot}")
-  os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(HERE, "..", ".jax_cache"))
+  # No JAX_COMPILATION_CACHE_DIR of its own: set here, after `import tasks` had pointed this process's
+  # cache at the package's directory, it reached only the precompile children, which then filled
+  # another directory than the one this process reads (every program compiled twice).
+  if a.precompile_workers:
+    # the children compile while this process holds the device: preallocating 75 % of a GPU here left
+    # them too little for autotuning (out-of-memory errors in the first H100 run)
+    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
   import jax
+
+  jax.monitoring.register_event_listener(_count_hit)
 
   probes = {n: tasks.make(n, robot=a.robot or tasks.robots.DEFAULT).unwrapped for n in names}
   pairs = [(n, v) for n in names for v in variants if applicable(probes[n], v)]
