@@ -93,10 +93,13 @@ def record_chunks(env, policy, episodes: int, seed: int = 0, *, task: str, episo
   keys = np.asarray(jax.random.split(jax.random.PRNGKey(seed), episodes))
   pad = (-episodes) % chunk
   keys = np.concatenate([keys, np.repeat(keys[-1:], pad, 0)]) if pad else keys
-  starts = range(0, keys.shape[0], chunk)
+  return _stream(env, run, keys, episodes, chunk, T, task, env_config, label, log)  # checked before any compile
+
+
+def _stream(env, run, keys, episodes: int, chunk: int, T: int, task: str, env_config, label: str, log):
   t0 = time.perf_counter()
   pending = run(keys[:chunk])
-  for i in starts:
+  for i in range(0, keys.shape[0], chunk):
     nxt = run(keys[i + chunk : i + 2 * chunk]) if i + chunk < keys.shape[0] else None  # asynchronous dispatch
     n = min(chunk, episodes - i)
     steps, success, final_h = jax.tree.map(lambda a: np.asarray(a)[:n], pending)  # waits for chunk i only
