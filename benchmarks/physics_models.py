@@ -24,10 +24,8 @@ run under ``benchmarks/results/`` (or ``--out``), with the exact command.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import shlex
 import sys
 import time
@@ -160,20 +158,15 @@ def main(argv=None) -> int:
   os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
   import jax
 
-  from mjx_damage import io
+  from mjx_damage import io, runtime
 
   clock = time.perf_counter if a.clock == "wall" else time.process_time
   results = [measure(v, cfgs[v], a.envs, a.steps, a.substeps, clock, a.repeats) for v in variants]
   device = jax.devices()[0]
-  stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
   record = {
       "benchmark": "physics_models",
       "command": " ".join(shlex.quote(x) for x in [sys.executable, *sys.argv]),
-      "timestamp_utc": stamp,
-      "device": f"{device.platform}:{device.device_kind}",
-      "host": platform.node(),
-      "cpu_count": os.cpu_count(),
-      "jax": jax.__version__,
+      **runtime.run_facts(),
       "envs": a.envs,
       "steps": a.steps,
       "substeps": a.substeps,
@@ -184,7 +177,7 @@ def main(argv=None) -> int:
       "results": results,
   }
   out = a.out or os.path.join(os.path.dirname(os.path.abspath(__file__)), "results",
-                              f"physics_models_{device.platform}_{stamp}.json")
+                              f"physics_models_{device.platform}_{record['timestamp_utc']}.json")
   io.write_json(out, record)
   print(f"wrote {out}")
   return 0

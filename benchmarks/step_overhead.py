@@ -48,10 +48,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime
 import json
 import os
-import platform
 import shlex
 import sys
 import time
@@ -251,20 +249,14 @@ def markdown(record: dict) -> str:
 
 
 
-def write(stem: str, a, argv, device, rows: list, old) -> None:
+def write(stem: str, a, argv, rows: list, old) -> None:
   """Results so far into ``stem``.json/.md, merged with an earlier file of the same setting (rows replaced by key)."""
-  import jax
-
-  from mjx_damage import io
+  from mjx_damage import io, runtime
 
   record = {
       "benchmark": "step_overhead",
       "command": " ".join(shlex.quote(x) for x in [sys.executable, *(sys.argv if argv is None else ["benchmarks/step_overhead.py", *argv])]),
-      "timestamp_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ"),
-      "device": f"{device.platform}:{device.device_kind}",
-      "host": platform.node(),
-      "cpu_count": os.cpu_count(),
-      "jax": jax.__version__,
+      **runtime.run_facts(),
       "envs": a.envs,
       "steps": a.steps,
       "repeats": a.repeats,
@@ -352,7 +344,7 @@ def main(argv=None) -> int:
   rows = []
   for n, v in pairs:
     rows.append(measure(n, v, a.envs, a.steps, a.repeats, a.policy, clock, a.robot))
-    write(stem, a, argv, device, rows, old)  # after every row: a time limit keeps what was measured
+    write(stem, a, argv, rows, old)  # after every row: a time limit keeps what was measured
   print(f"wrote {stem}.json, {stem}.md")
   return 0
 

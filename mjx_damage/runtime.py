@@ -156,6 +156,20 @@ def enable_compilation_cache() -> str | None:
   return path
 
 
+def run_facts() -> dict:
+  """When and where a benchmark ran, for its results file: UTC timestamp, JAX's first device
+  (``platform:kind``), host name, CPU cores and the jax version."""
+  import datetime
+  import platform
+
+  import jax
+
+  d = jax.devices()[0]
+  return {"timestamp_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ"),
+          "device": f"{d.platform}:{d.device_kind}", "host": platform.node(), "cpu_count": os.cpu_count(),
+          "jax": jax.__version__}
+
+
 def device_info() -> tuple[str, str]:
   """(slug, description) of JAX's first device, for results file names and headers.
 
