@@ -150,7 +150,9 @@ def regimes(careful, careless, args):
   }
 
 
-def run_task(task, args, log):
+def run_task(task, args, log, save=lambda out: None):
+  """Record, curate, train and evaluate one task; ``save`` gets the task's results so far after the
+  recording and after every regime (``complete`` False until the last), so a time limit keeps them."""
   import numpy as np
 
   import tasks
@@ -171,7 +173,9 @@ def run_task(task, args, log):
     demos[cond] = ds
   out["timings"]["record_s"] = time.perf_counter() - t0
   out["recorded"] = recorded
+  out["regimes"], out["complete"] = {}, False
   log(f"{task}: recorded {recorded} in {out['timings']['record_s']:.0f} s")
+  save(out)
 
   seeds = list(range(args.seeds))
   if args.policy == "flow":
@@ -183,17 +187,18 @@ def run_task(task, args, log):
     apply = bc.bc_apply(env.action_size, args.hidden)
   evaluator = E.Evaluator(env, E.parametrized_policy(apply, None), E.env_episode_length(env))
   keys = E.episode_keys(0, args.eval_episodes)
-  out["regimes"] = {}
   t_train = t_eval = 0.0
   for name, ds in regimes(demos["careful"], demos["careless"], args).items():
     if isinstance(ds, str):
       out["regimes"][name] = {"skipped": ds}
       log(f"{task} / {name}: skipped: {ds}")
       continue
+    log(f"{task} / {name}: training {len(seeds)} seeds on {ds.num_episodes} demos")
     t1 = time.perf_counter()
     res = train(ds)
     losses = np.asarray(res.losses)
     t2 = time.perf_counter()
+    log(f"{task} / {name}: trained in {t2 - t1:.0f} s; evaluating")
     per_seed = []
     for i in range(len(seeds)):
       per_ep = evaluator.run(keys, 1.0, params=imitation.seed_params(res.params, i))
@@ -210,7 +215,9 @@ def run_task(task, args, log):
     log(f"{task} / {name}: {row['episodes']} demos, {row['transitions']} steps; completion "
         f"{row['completion']:.2f}±{row['completion_ci95']:.2f}, safe {row['safe_completion']:.2f}"
         f"±{row['safe_completion_ci95']:.2f} (train {t2 - t1:.0f} s, eval {t3 - t2:.0f} s)")
-  out["timings"].update(train_s=t_train, eval_s=t_eval, total_s=time.perf_counter() - t0)
+    out["timings"].update(train_s=t_train, eval_s=t_eval, total_s=time.perf_counter() - t0)
+    save(out)
+  out["complete"] = True
   return out
 
 
@@ -236,6 +243,9 @@ def write_md(path, payload):
                    f"{100 * row['safe_completion_ci95']:.1f} | {row['avg_health']:.1f} | "
                    + ", ".join(f"{100 * x['completion']:.0f} / {100 * x['safe_completion']:.0f}"
                                for x in row["per_seed"]) + " |")
+  partial = [t["task"] for t in payload["tasks"] if t.get("complete") is False]
+  if partial:
+    lines += ["", f"Incomplete (the run ended before every regime was done): {', '.join(partial)}."]
   lines += ["", "Recorded demonstrations (before keeping the successful ones):", ""]
   for t in payload["tasks"]:
     for c, r in t["recorded"].items():
@@ -259,7 +269,7 @@ def plot(path, payload):
   w = 0.8 / len(REGIMES)
   for j, r in enumerate(REGIMES):
     xs = [i + (j - (len(REGIMES) - 1) / 2) * w for i in range(len(rows))]
-    get = lambda k: [100 * t["regimes"][r].get(k, float("nan")) for t in rows]
+    get = lambda k: [100 * t["regimes"].get(r, {}).get(k, float("nan")) for t in rows]
 
     def err(k):  # the t-interval drawn within [0, 100] (with few seeds it can reach past both)
       m, h = get(k), [0.0 if math.isnan(x) else x for x in get(k + "_ci95")]
@@ -347,17 +357,22 @@ def main(argv=None) -> int:
     if old.get("config") != config:
       print(f"error: --resume: {base}.json has another config: {old.get('config')}", file=sys.stderr)
       return 2
-    payload["tasks"] = old["tasks"]
+    payload["tasks"] = [t for t in old["tasks"] if t.get("complete", True)]  # an incomplete task runs again
   done = {t["task"] for t in payload["tasks"]}
   log = lambda m: print(m, flush=True)
   for task in args.tasks:
     if task in done:
       log(f"{task}: already in {base}.json, skipped")
       continue
-    payload["tasks"].append(run_task(task, args, log))
-    write_json(base + ".json", payload)
-    write_md(base + ".md", payload)
-    plot(base + ".png", payload)
+    payload["tasks"].append(None)
+
+    def save(out):
+      payload["tasks"][-1] = out
+      write_json(base + ".json", payload)
+      write_md(base + ".md", payload)
+      plot(base + ".png", payload)
+
+    save(run_task(task, args, log, save))
   log(f"wrote {base}.{{json,md,png}}")
   return 0
 
