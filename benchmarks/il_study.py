@@ -20,7 +20,8 @@ Per task (one command does everything):
    over seeds.
 
 Writes ``benchmarks/results/il_study_<device>[_<tag>].{json,md,png}`` (rewritten
-after every task; ``--resume`` skips the tasks already in that JSON).
+after every regime, so a time limit keeps what was done; ``--resume`` skips the
+tasks completed in that JSON and runs an incomplete one again).
 
 GPU (full size; about 2–4 min per task on one H100 — run tasks in separate calls
 if one 10-minute call is too short: one ``--tag`` per call, then ``--combine``)::
