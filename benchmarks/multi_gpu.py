@@ -151,6 +151,8 @@ def train_runs(args, d: int, save=lambda part: None) -> dict:
 
 
 def eval_runs(args, d: int, save=lambda part: None) -> dict:
+  """Evaluation-sweep rates of ``args.repeats`` calls on ``d`` devices after a warm-up call; ``save`` gets
+  the part after every call."""
   import jax
   import numpy as np
 
@@ -173,8 +175,10 @@ def eval_runs(args, d: int, save=lambda part: None) -> dict:
     t0 = time.perf_counter()
     ev.run(keys, frag)
     rates.append(len(keys) * T / (time.perf_counter() - t0))
+    out = {"episodes": int(len(keys)), "episode_length": T, "compile_s": compile_s, "env_steps_per_s": stats(rates)}
+    save(out)  # a time limit keeps the finished calls
   print(f"eval D={d}: {stats(rates)['mean']:,.0f} env-steps/s ({len(keys)} episodes x {T} steps)", flush=True)
-  return {"episodes": int(len(keys)), "episode_length": T, "compile_s": compile_s, "env_steps_per_s": stats(rates)}
+  return out
 
 
 def write(base: str, payload: dict) -> None:

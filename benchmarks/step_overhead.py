@@ -248,7 +248,6 @@ def markdown(record: dict) -> str:
   return "\n".join(lines) + "\n"
 
 
-
 def write(stem: str, a, argv, rows: list, old) -> None:
   """Results so far into ``stem``.json/.md, merged with an earlier file of the same setting (rows replaced by key)."""
   from mjx_damage import io, runtime

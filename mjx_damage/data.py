@@ -239,7 +239,7 @@ def save_chunks(path: str, chunks: Iterable[Dataset], overwrite: bool = False) -
   path = os.fspath(path)
   if os.path.exists(path) and not overwrite:
     raise ValueError(f"{path}: exists; pass overwrite=True (CLI: --overwrite) to replace it")
-  first, written = None, 0
+  first, written, names = None, 0, ()
   with atomic_path(path, suffix=".hdf5") as tmp:
     with h5py.File(tmp, "w") as f:
       for ds in chunks:
@@ -254,7 +254,6 @@ def save_chunks(path: str, chunks: Iterable[Dataset], overwrite: bool = False) -
           g.attrs["format"] = FORMAT
           g.attrs["entity_names"] = json.dumps(list(ds.entity_names))
           g.attrs["total"] = 0
-          names = ()
         else:
           _check_compatible(first, ds, "chunks")
         names = tuple(dict.fromkeys(names + ds.label_names))

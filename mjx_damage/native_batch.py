@@ -144,8 +144,9 @@ class NativeBatchEnv:
     binding = getattr(inner, "damage_binding", None)
     if binding is None or not hasattr(inner, "physics_step"):
       raise ValueError(f"env: the native backend needs a DamageEnv (damage per substep), got {type(inner).__name__}")
-    if refusal(binding):
-      raise ValueError(refusal(binding))
+    reason = refusal(binding)
+    if reason:
+      raise ValueError(reason)
     self.env, self.num_envs = env, num_envs
     self.n_substeps = int(inner.n_substeps)
     self.model, self.layout = sensor_model(env, spec, slots)
