@@ -14,9 +14,9 @@ Two measurements per task, both with an operator of :mod:`tasks.operators`
 * **streamed** — what ``mjx-damage record`` does: the same episodes through
   :func:`train.record.record_chunks` into :func:`mjx_damage.data.save_chunks`,
   each chunk written while the device records the next. Rate = transitions of
-  chunks 2..N / time from chunk 1's arrival to the file's close (which includes
-  writing chunk 1: slightly conservative). Target on one H100: ≥ 100 k
-  transitions/s recorded and written.
+  chunks 2..N / time from chunk 1's arrival to chunk N's (each interval writes
+  one chunk and records the next; needs ``--steady-episodes`` ≥ 2 ×
+  ``--chunk``). Target on one H100: ≥ 100 k transitions/s recorded and written.
 
 Results: ``benchmarks/results/record_throughput_<device>.{json,md}``.
 
@@ -77,6 +77,21 @@ def timed_record(env, op, task: str, episodes: int, chunk: int, seed: int, path:
 
 def timed_stream(env, op, task: str, episodes: int, chunk: int, seed: int, path: str) -> dict:
   """Record and write at once (``mjx-damage record``'s path); the steady rate after the first chunk."""
+  return stream_rate(lambda: record_chunks(env, op, episodes, seed, task=task,
+                                           episode_length=E.env_episode_length(env), chunk=chunk),
+                     path, episodes, min(chunk, episodes))
+
+
+def stream_rate(make_chunks, path: str, episodes: int, chunk: int) -> dict:
+  """Write ``make_chunks()``'s stream with :func:`mjx_damage.data.save_chunks`, timing each chunk's arrival.
+
+  Between two arrivals the writer writes one chunk while the device records the
+  next, so the steady rate is the transitions of chunks 2..N over the time from
+  chunk 1's arrival to chunk N's: N − 1 chunks recorded and N − 1 written. (Up
+  to this commit the time ran to the file's close, which also counts chunk N's
+  write: with N = 4 chunks that understated a write-bound rate by a quarter.)
+  Needs at least 2 chunks (otherwise ``None``).
+  """
   marks, sizes = [], []
 
   def stamped(chunks):
@@ -86,11 +101,11 @@ def timed_stream(env, op, task: str, episodes: int, chunk: int, seed: int, path:
       yield ds
 
   t0 = time.perf_counter()
-  D.save_chunks(path, stamped(record_chunks(env, op, episodes, seed, task=task,
-                                            episode_length=E.env_episode_length(env), chunk=chunk)))
+  D.save_chunks(path, stamped(make_chunks()))
   t1 = time.perf_counter()
-  return {"episodes": episodes, "chunk": min(chunk, episodes), "total_s": t1 - t0,
-          "first_chunk_s": marks[0] - t0, "transitions_per_s": sum(sizes[1:]) / (t1 - marks[0])}
+  steady = sum(sizes[1:]) / (marks[-1] - marks[0]) if len(marks) > 1 else None
+  return {"episodes": episodes, "chunk": chunk, "chunks": len(marks), "total_s": t1 - t0,
+          "first_chunk_s": marks[0] - t0, "last_write_s": t1 - marks[-1], "transitions_per_s": steady}
 
 
 def main(argv=None) -> int:
@@ -149,7 +164,8 @@ def main(argv=None) -> int:
            "From scratch: one call, compilation included (what `mjx-damage record` takes). Steady state: "
            "chunks after the first (which compiles); 'both' = 1 / (1/recorded + 1/written); 'streamed' = "
            "recorded and written at once, each chunk written while the device records the next (what "
-           "`mjx-damage record` does; chunks after the first). Persistent "
+           "`mjx-damage record` does): transitions of chunks 2..N over the time from chunk 1's arrival at the "
+           "writer to chunk N's, in which N − 1 chunks are recorded and N − 1 written. Persistent "
            f"compilation cache: {'on (' + cache + '; a warm cache skips compiling)' if cache else 'off (every run compiles)'}.",
            "",
            "| task | T | from scratch: episodes | s (compile incl.) | of it writing s | file MB | "

@@ -50,7 +50,6 @@ from mjx_damage.io import write_json, write_text  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 RL_TASKS = ("place_plate", "pick_egg", "shelve_item")
-RL_SETTINGS = tasks.RL_SETTINGS  # the setting each task is trained in (issue 24)
 WINDOW = 10  # steps per window of the reward-trace summary
 
 
@@ -246,12 +245,17 @@ def parse_args(argv=None):
                  help="w of the damage-aware return also reported (task − w·cost; the paper's w = 2)")
   p.add_argument("--style", action="append", default=[],
                  help="TASK:STYLE, an extra scripted style of a task (repeatable)")
+  p.add_argument("--task-settings", default=None, metavar="JSON",
+                 help="task keyword arguments over each task's RL setting (tasks.RL_SETTINGS), e.g. "
+                      "'{\"start\": \"pregrasp\"}'; the results record them")
   p.add_argument("--tag", default="", help="results file suffix: reward_preference_TAG.{json,md}")
   p.add_argument("--out-dir", default=RESULTS)
   a = p.parse_args(argv)
   a.task_list = [n for n in a.tasks.split(",") if n]
+  a.settings = {}
   for n in a.task_list:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
+    a.settings[n] = tasks.rl_settings(n, a.task_settings)
   if isinstance(a.episodes, bool) or a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   try:
@@ -281,7 +285,7 @@ def main(argv=None) -> int:
   stem = os.path.join(a.out_dir, "reward_preference" + (f"_{a.tag}" if a.tag else ""))
   for n in a.task_list:
     styles = ["safe", "unsafe"] + a.extra.get(n, [])
-    t = run_task(n, styles, a.episodes, a.gamma_list, a.seed, dict(RL_SETTINGS.get(n, {})), a.damage_weight)
+    t = run_task(n, styles, a.episodes, a.gamma_list, a.seed, a.settings[n], a.damage_weight)
     result["tasks"].append(t)
     for c in t["comparisons"]:
       print(f"{n} {c['policy']} - safe: " + ", ".join(

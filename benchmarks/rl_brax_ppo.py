@@ -104,9 +104,13 @@ def network_factory(init_log_std: tuple[float, float] | None):
   return make
 
 
-def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None) -> dict:
-  """One brax PPO run, then the 1024-episode evaluation of its deterministic policy; a result row."""
-  settings = dict(RL_SETTINGS.get(task, {}))
+def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
+              settings: dict | None = None) -> dict:
+  """One brax PPO run, then the 1024-episode evaluation of its deterministic policy; a result row.
+
+  ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
+  """
+  settings = dict(RL_SETTINGS.get(task, {}) if settings is None else settings)
   env = tasks.make(task, damage_weight=weight, **settings)
   episode_length = env.unwrapped.episode_length
   curve, last = [], {}
@@ -163,9 +167,16 @@ def _std_label(row: dict) -> str:
   return "" if std is None else f", initial log-std {std[0]:g}/{std[1]:g}"
 
 
+def _settings_label(row: dict, doc: dict) -> str:
+  """The row's task settings where they differ from the file's (the task's RL setting)."""
+  s = row.get("task_settings", doc["task_settings"])
+  return "" if s == doc["task_settings"] else ", task " + ", ".join(f"{k}={v}" for k, v in s.items())
+
+
 def _key(row: dict):
   """A rerun with the same weight, seed and settings replaces its row; other rows are kept."""
-  return row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True)
+  return (row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True),
+          json.dumps(row.get("task_settings"), sort_keys=True))
 
 
 def render_md(doc: dict) -> str:
@@ -185,7 +196,7 @@ def render_md(doc: dict) -> str:
   ]
   for r in doc["rows"]:
     lines.append(
-        f"| {r['reward']}{_std_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
+        f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
         f"| {r['eval_episodes']} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
@@ -224,6 +235,9 @@ def parse_args(argv=None):
   p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
                  help="initial log-std of the policy (pre-tanh; gripper = last action dim), as our trainer's "
                       "--init-log-std; write --init-log-std=-0.5,-1.5. Default: brax's init (std ≈ 1.3)")
+  p.add_argument("--task-settings", default=None, metavar="JSON",
+                 help="task keyword arguments over its RL setting (tasks.RL_SETTINGS), e.g. "
+                      "'{\"start\": \"pregrasp\"}'; rows record them")
   p.add_argument("--out-dir", default=RESULTS)
   p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
   a = p.parse_args(argv)
@@ -249,6 +263,7 @@ def parse_args(argv=None):
     a.init_log_std = tuple(_csv(a.init_log_std, float, "init_log_std"))
     if len(a.init_log_std) != 2 or not all(-5.0 <= v <= 2.0 for v in a.init_log_std):  # also refuses NaN
       raise ValueError(f"init_log_std: ARM,GRIPPER, each in [-5, 2], got {a.init_log_std}")
+  a.settings = tasks.rl_settings(a.task, a.task_settings)
   return a
 
 
@@ -271,7 +286,7 @@ def main(argv=None) -> int:
   for w in a.weights:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
-      row = train_one(a.task, w, s, cfg, a.budget_seconds)
+      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "

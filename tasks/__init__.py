@@ -93,6 +93,31 @@ def task_class(name: str):
   return getattr(importlib.import_module(module), cls)
 
 
+def rl_settings(name: str, overrides_json: str | None = None) -> dict:
+  """Task ``name``'s RL setting (:data:`RL_SETTINGS`) with the task keywords of a JSON object over it.
+
+  For the benchmarks' ``--task-settings`` flag. Checked by the task's own constructor, before anything
+  compiles: bad JSON, a non-object, an unknown keyword or a refused value raise ``ValueError`` naming
+  ``task_settings``.
+  """
+  settings = dict(RL_SETTINGS.get(name, {}))
+  if overrides_json is None:
+    return settings
+  import json
+  try:
+    extra = json.loads(overrides_json)
+  except json.JSONDecodeError as e:
+    raise ValueError(f"task_settings: not JSON ({e}), got {overrides_json!r}") from None
+  if not isinstance(extra, dict):
+    raise ValueError(f"task_settings: a JSON object of task keyword arguments, got {overrides_json!r}")
+  settings.update(extra)
+  try:
+    task_class(name)(**settings)
+  except (TypeError, ValueError) as e:
+    raise ValueError(f"task_settings: {name} refuses {settings}: {e}") from None
+  return settings
+
+
 def _task_options(cls) -> dict:
   """Constructor keywords of a task class (its own and inherited) with their defaults."""
   opts = {}

@@ -17,6 +17,11 @@ Tracked entities and parameters:
 
 Initial state (per episode): egg at x ∈ [−0.1, 0.1], y ∈ [−0.1, 0.1] m on the
 counter; grip point x, y ∈ egg ± 0.12 m, z ∈ [0.12, 0.18] m, gripper open.
+``start="pregrasp"``: the grip point at the egg's equator instead, the fingers
+pre-shaped 1 cm clear of the shell on each side (where the scripted policies
+are when they close): the episode begins at the decision the damage model
+judges, how hard to close, as Place Plate's in-hand start begins at how to set
+the plate down (docs/rl_task_design.md).
 
 Success (per step): egg centre ≥ 8 cm above the counter (held up).
 
@@ -59,6 +64,7 @@ EGG_R = 0.022  # m
 LIFT_Z = 0.08  # m, egg centre height that counts as picked
 GRASP_Z = 0.006  # m, grip-point height when grasping: the pads cover the egg's equator (z = 2.2 cm)
 GOALS = ("lift", "carry")
+STARTS = ("counter", "pregrasp")
 # carry goal: egg centre this far (xy) from the egg's start, in any direction, and this high
 CARRY_DIST = (0.20, 0.30)  # m
 CARRY_Z = (0.12, 0.18)  # m
@@ -92,10 +98,12 @@ class PickEgg(Task):
   success_condition = "egg held ≥ 8 cm above the counter (goal='carry': held still within 2 cm of the goal)"
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
-               success_bonus=1.0, goal="lift"):
+               success_bonus=1.0, goal="lift", start="counter"):
     if goal not in GOALS:
       raise ValueError(f"goal: unknown {goal!r}; valid: {', '.join(GOALS)}")
-    self.goal = goal
+    if start not in STARTS:
+      raise ValueError(f"start: unknown {start!r}; valid: {', '.join(STARTS)}")
+    self.goal, self.start = goal, start
     if goal == "carry":
       self.workspace = CARRY_WORKSPACE
       self.default_episode_length = CARRY_EPISODE_LENGTH
@@ -118,7 +126,10 @@ class PickEgg(Task):
     k = jax.random.split(rng, 2)
     egg = jax.random.uniform(k[0], (2,), minval=-0.1, maxval=0.1)
     off = jax.random.uniform(k[1], (3,), minval=jnp.array([-0.12, -0.12, 0.12]), maxval=jnp.array([0.12, 0.12, 0.18]))
-    qpos = self.robot.home(qpos, jnp.concatenate([egg + off[:2], off[2:]]))
+    if self.start == "pregrasp":  # grip point at the egg's equator, fingers pre-shaped 1 cm clear of the shell
+      qpos = self.robot.home(qpos, jnp.concatenate([egg, jnp.array([GRASP_Z])]), R.FINGER_HALF_THICK + EGG_R + 0.01)
+    else:
+      qpos = self.robot.home(qpos, jnp.concatenate([egg + off[:2], off[2:]]))
     qpos = qpos.at[self._q : self._q + 7].set(jnp.concatenate([egg, jnp.array([EGG_R, 1.0, 0, 0, 0])]))
     if self.goal == "lift":
       return qpos, {}

@@ -36,3 +36,29 @@ def test_default_is_brax_init():
 def test_bad_init_log_std_is_refused_naming_it(value):
   with pytest.raises(ValueError, match="init_log_std"):
     R.parse_args([f"--init-log-std={value}"])
+
+
+@pytest.mark.parametrize("value", ['{"start": "midair"}', '{"nonsense": 1}', '["start"]', "{start:"])
+def test_bad_task_settings_are_refused_naming_them(value):
+  with pytest.raises(ValueError, match="task_settings"):
+    R.parse_args(["--task", "pick_egg", f"--task-settings={value}"])
+
+
+def test_task_settings_go_over_the_rl_setting_and_keep_rows_of_other_settings_apart():
+  a = R.parse_args(["--task", "pick_egg", '--task-settings={"start": "pregrasp"}'])
+  assert a.settings == {**R.RL_SETTINGS["pick_egg"], "start": "pregrasp"}
+  assert R.parse_args(["--task", "pick_egg"]).settings == R.RL_SETTINGS["pick_egg"]
+  row = {"damage_weight": 0.0, "seed": 0, "recipe": {}, "task_settings": a.settings}
+  assert R._key(row) != R._key(dict(row, task_settings=R.RL_SETTINGS["pick_egg"]))
+  doc = {"task_settings": R.RL_SETTINGS["pick_egg"]}
+  assert R._settings_label(row, doc) == ", task goal=carry, start=pregrasp"
+  assert R._settings_label(dict(row, task_settings=doc["task_settings"]), doc) == ""
+
+
+def test_reward_preference_takes_the_same_task_settings():
+  P = load_benchmark("reward_preference")
+  a = P.parse_args(["--tasks", "pick_egg,place_plate", '--task-settings={"episode_length": 60}'])
+  assert a.settings["pick_egg"] == {**R.RL_SETTINGS["pick_egg"], "episode_length": 60}
+  assert a.settings["place_plate"] == {**R.RL_SETTINGS["place_plate"], "episode_length": 60}
+  with pytest.raises(ValueError, match="task_settings"):
+    P.parse_args(["--tasks", "pick_egg", '--task-settings={"start": "midair"}'])

@@ -134,3 +134,35 @@ def test_pick_egg_goal_knob():
   # the carry's smooth shell: its own μ on every contact, not the pads' larger one
   assert lift.mj_model.geom_priority[egg[0]] == 0 and lift.mj_model.geom_friction[egg[0], 0] == pytest.approx(1.0)
   assert carry.mj_model.geom_priority[egg[1]] == 1 and carry.mj_model.geom_friction[egg[1], 0] == pytest.approx(0.7)
+
+
+PICK_EGG_PREGRASP = {**tasks.RL_SETTINGS["pick_egg"], "start": "pregrasp"}
+
+
+def test_pick_egg_start_knob():
+  """``start`` is validated before anything compiles; ``pregrasp`` puts the grip point at the egg's equator
+  with the fingers 1 cm clear of the shell, and leaves the counter start's draws as they were."""
+  from tasks import pick_egg as P
+  for bad in ("in_hand", "", None, 1):
+    with pytest.raises(ValueError, match="start"):
+      tasks.make("pick_egg", start=bad)
+  assert tasks.default_config("pick_egg")["start"] == "counter"
+  rng = jax.random.PRNGKey(3)
+  counter = tasks.make("pick_egg", goal="carry").reset(rng).pipeline_state
+  pre_env = tasks.make("pick_egg", **PICK_EGG_PREGRASP)
+  pre, task = pre_env.reset(rng).pipeline_state, pre_env.unwrapped
+  egg = np.asarray(task.egg_pos(pre))
+  np.testing.assert_allclose(egg, np.asarray(task.egg_pos(counter)), atol=1e-6)  # same egg, same goal draws
+  np.testing.assert_allclose(np.asarray(task.robot.eef_pos(pre)), [egg[0], egg[1], P.GRASP_Z], atol=2e-3)
+  assert float(task.robot.gap(pre)) == pytest.approx(2 * P.EGG_R + 0.02, abs=1e-3)
+  assert np.linalg.norm(np.asarray(task.robot.eef_pos(counter))[:2] - egg[:2]) > 1e-3  # the counter start: elsewhere
+
+
+def test_pick_egg_pregrasp_start_separation_and_shortcut_preference():
+  """The pre-grasp start (docs/rl_task_design.md) keeps the scripted separation and the shortcut's lead."""
+  check(run_policies("pick_egg", PICK_EGG_PREGRASP, episodes=16), "pick_egg pregrasp")
+
+
+@pytest.mark.slow
+def test_pick_egg_pregrasp_start_many_episodes():
+  check(run_policies("pick_egg", PICK_EGG_PREGRASP, episodes=256, seed=1), "pick_egg pregrasp")
