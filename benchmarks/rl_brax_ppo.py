@@ -264,6 +264,8 @@ def parse_args(argv=None):
     if len(a.init_log_std) != 2 or not all(-5.0 <= v <= 2.0 for v in a.init_log_std):  # also refuses NaN
       raise ValueError(f"init_log_std: ARM,GRIPPER, each in [-5, 2], got {a.init_log_std}")
   a.settings = tasks.rl_settings(a.task, a.task_settings)
+  if "damage_weight" in a.settings:
+    raise ValueError("task_settings: damage_weight is set by --damage-weights, not here")
   return a
 
 

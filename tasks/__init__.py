@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import json
 
 from mjx_damage.wrapper import DamageWrapper
 from tasks import robots
@@ -96,14 +97,13 @@ def task_class(name: str):
 def rl_settings(name: str, overrides_json: str | None = None) -> dict:
   """Task ``name``'s RL setting (:data:`RL_SETTINGS`) with the task keywords of a JSON object over it.
 
-  For the benchmarks' ``--task-settings`` flag. Checked by the task's own constructor, before anything
-  compiles: bad JSON, a non-object, an unknown keyword or a refused value raise ``ValueError`` naming
-  ``task_settings``.
+  For the benchmarks' ``--task-settings`` flag. Checked by :func:`make` (the task's constructor included),
+  before anything compiles: bad JSON, a non-object, an unknown override or a refused value raise
+  ``ValueError`` naming ``task_settings``.
   """
   settings = dict(RL_SETTINGS.get(name, {}))
   if overrides_json is None:
     return settings
-  import json
   try:
     extra = json.loads(overrides_json)
   except json.JSONDecodeError as e:
@@ -112,7 +112,7 @@ def rl_settings(name: str, overrides_json: str | None = None) -> dict:
     raise ValueError(f"task_settings: a JSON object of task keyword arguments, got {overrides_json!r}")
   settings.update(extra)
   try:
-    task_class(name)(**settings)
+    make(name, **settings)
   except (TypeError, ValueError) as e:
     raise ValueError(f"task_settings: {name} refuses {settings}: {e}") from None
   return settings

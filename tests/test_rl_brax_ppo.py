@@ -38,7 +38,8 @@ def test_bad_init_log_std_is_refused_naming_it(value):
     R.parse_args([f"--init-log-std={value}"])
 
 
-@pytest.mark.parametrize("value", ['{"start": "midair"}', '{"nonsense": 1}', '["start"]', "{start:"])
+@pytest.mark.parametrize("value", ['{"start": "midair"}', '{"nonsense": 1}', '["start"]', "{start:",
+                                   '{"damage_weight": 2}', '{"robot": "unicycle"}'])
 def test_bad_task_settings_are_refused_naming_them(value):
   with pytest.raises(ValueError, match="task_settings"):
     R.parse_args(["--task", "pick_egg", f"--task-settings={value}"])
