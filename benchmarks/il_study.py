@@ -14,10 +14,17 @@ Per task (one command does everything):
    points) (:mod:`train.curate`);
 3. train the policy (``--policy flow``: flow matching with 8-step action chunks,
    the paper's; or ``bc``) on each regime, all seeds in one compiled call;
-4. evaluate every (regime, seed) with the project's evaluator (one executable per
-   task: the weights are data) on ``--eval-episodes`` episodes: completion and
-   safe completion (DAMAGE_MODEL.md §7), mean over seeds with a 95 % t-interval
-   over seeds.
+4. flow policy: choose its sampling temperature (the scale of the initial noise;
+   ``--temperature``, default 0, 0.5 and 1) per regime, the one with the highest
+   completion over the seeds on ``--val-episodes`` validation episodes (keys apart
+   from the evaluation's; ties go to the lower temperature). Neither value suits
+   every task. Deterministic sampling (0) keeps pick_egg's grasp precise.
+   Shelve Item's clone of the careful operator never lets go of the box at 0:
+   the release is a sudden change in the last few steps of each demonstration;
+5. evaluate every (regime, seed) with the project's evaluator (one executable per
+   task: the weights, and the temperature, are data) on ``--eval-episodes``
+   episodes: completion and safe completion (DAMAGE_MODEL.md §7), mean over seeds
+   with a 95 % t-interval over seeds.
 
 Writes ``benchmarks/results/il_study_<device>[_<tag>].{json,md,png}`` (rewritten
 after every regime, so a time limit keeps what was done; ``--resume`` skips the
@@ -58,9 +65,12 @@ REGIME_LABELS = {"careless": "without health feedback", "careful": "with health 
                  "filtered_episodes": "health-filtered episodes", "filtered_datapoints": "health-filtered datapoints"}
 COLORS = {"careless": "tab:blue", "careful": "tab:orange", "all": "tab:green", "filtered_episodes": "tab:red",
           "filtered_datapoints": "tab:purple"}
-FULL = dict(demos=256, seeds=3, eval_episodes=256, steps=8000, batch=256, hidden=(512, 512, 512), chunk=256)
-QUICK = dict(demos=64, seeds=2, eval_episodes=64, steps=6000, batch=256, hidden=(512, 512, 512), chunk=64,
-             tasks=("pick_egg",))
+FULL = dict(demos=256, seeds=3, eval_episodes=256, val_episodes=64, steps=8000, batch=256, hidden=(512, 512, 512),
+            chunk=256)
+QUICK = dict(demos=64, seeds=2, eval_episodes=64, val_episodes=32, steps=6000, batch=256, hidden=(512, 512, 512),
+             chunk=64, tasks=("pick_egg",))
+TEMPERATURES = (0.0, 0.5, 1.0)  # the flow policy's sampling temperatures tried per regime
+VAL_SEED = 1  # validation episode keys (the evaluation's: seed 0)
 
 
 def parse(argv):
@@ -74,8 +84,11 @@ def parse(argv):
   p.add_argument("--batch", type=int, default=None)
   p.add_argument("--hidden", default=None, help="hidden sizes, e.g. 512,512,512")
   p.add_argument("--chunk", type=int, default=None, help="episodes per compiled recording call")
-  p.add_argument("--temperature", type=float, default=None,
-                 help="flow policy: scale of the initial noise when acting (default: flow_policy.TEMPERATURE)")
+  p.add_argument("--temperature", default=None,
+                 help="flow policy: scale(s) of the initial noise when acting, comma-separated; with several, "
+                      f"each regime uses the best on validation episodes (default: {','.join(map(str, TEMPERATURES))})")
+  p.add_argument("--val-episodes", type=int, default=None,
+                 help="validation episodes per (regime, seed, temperature) when choosing the temperature")
   p.add_argument("--max-damage", type=float, default=5.0, help="datapoint filter: health points over 8 steps")
   p.add_argument("--min-health", type=float, default=95.0, help="episode filter threshold")
   p.add_argument("--quick", action="store_true", help="CPU size: " + str(QUICK))
@@ -86,18 +99,21 @@ def parse(argv):
   p.add_argument("--tag", default="")
   args = p.parse_args(argv)
   size = QUICK if args.quick else FULL
-  for k in ("demos", "seeds", "eval_episodes", "steps", "batch", "chunk"):
+  for k in ("demos", "seeds", "eval_episodes", "val_episodes", "steps", "batch", "chunk"):
     if getattr(args, k) is None:
       setattr(args, k, size[k])
     if getattr(args, k) < 1:
       p.error(f"--{k.replace('_', '-')}: must be >= 1")
   args.hidden = tuple(int(s) for s in args.hidden.split(",")) if args.hidden else size["hidden"]
   if args.temperature is None:
-    from train.flow_policy import TEMPERATURE
-
-    args.temperature = TEMPERATURE
-  if args.temperature < 0:
-    p.error("--temperature: must be >= 0")
+    args.temperature = list(TEMPERATURES)
+  else:
+    try:
+      args.temperature = [float(t) for t in args.temperature.split(",") if t.strip()]
+    except ValueError:
+      p.error(f"--temperature: comma-separated numbers >= 0, got {args.temperature!r}")
+    if not args.temperature or not all(0.0 <= t < 100.0 for t in args.temperature):  # also refuses NaN
+      p.error(f"--temperature: comma-separated numbers in [0, 100), got {args.temperature}")
   if args.quick and args.tasks == ",".join(TASKS):
     args.tasks = ",".join(QUICK["tasks"])
   args.tasks = [t for t in args.tasks.split(",") if t]
@@ -151,6 +167,11 @@ def regimes(careful, careless, args):
   }
 
 
+def choose_temperature(validation: dict) -> float:
+  """The temperature with the highest validation completion; ties go to the lower temperature."""
+  return min(validation, key=lambda t: (-validation[t], t))
+
+
 def run_task(task, args, log, save=lambda out: None):
   """Record, curate, train and evaluate one task; ``save`` gets the task's results so far after the
   recording and after every regime (``complete`` False until the last), so a time limit keeps them."""
@@ -178,16 +199,28 @@ def run_task(task, args, log, save=lambda out: None):
   log(f"{task}: recorded {recorded} in {out['timings']['record_s']:.0f} s")
   save(out)
 
+  import jax.numpy as jnp
+
   seeds = list(range(args.seeds))
   if args.policy == "flow":
     train = lambda ds: flow_policy.train_flow(ds, seeds, args.steps, args.batch, hidden=args.hidden)
-    apply = flow_policy.flow_apply(env.action_size, flow_policy.CHUNK, args.hidden,
-                                   temperature=args.temperature)
+    apply = flow_policy.flow_apply(env.action_size, flow_policy.CHUNK, args.hidden, temperature=None)
+    weights = lambda res, i, t: {**imitation.seed_params(res.params, i), "temperature": jnp.float32(t)}
+    temperatures = args.temperature
   else:
     train = lambda ds: bc.train_bc(ds, seeds, args.steps, args.batch, hidden=args.hidden)
     apply = bc.bc_apply(env.action_size, args.hidden)
+    weights = lambda res, i, t: imitation.seed_params(res.params, i)
+    temperatures = [None]
   evaluator = E.Evaluator(env, E.parametrized_policy(apply, None), E.env_episode_length(env))
   keys = E.episode_keys(0, args.eval_episodes)
+  val_keys = E.episode_keys(VAL_SEED, args.val_episodes)
+
+  def completion(res, keys, t):
+    """Mean completion over the seeds at temperature ``t`` on episodes ``keys``."""
+    per_ep = [evaluator.run(keys, 1.0, params=weights(res, i, t)) for i in range(len(seeds))]
+    return float(np.mean([E.metrics(p, env.entity_names, env.safe_threshold)["completion"] for p in per_ep]))
+
   t_train = t_eval = 0.0
   for name, ds in regimes(demos["careful"], demos["careless"], args).items():
     if isinstance(ds, str):
@@ -200,16 +233,21 @@ def run_task(task, args, log, save=lambda out: None):
     losses = np.asarray(res.losses)
     t2 = time.perf_counter()
     log(f"{task} / {name}: trained in {t2 - t1:.0f} s; evaluating")
+    validation = {t: completion(res, val_keys, t) for t in temperatures} if len(temperatures) > 1 else {}
+    temp = choose_temperature(validation) if validation else temperatures[0]
+    if validation:
+      log(f"{task} / {name}: validation completion by temperature {validation}: {temp:g}")
     per_seed = []
     for i in range(len(seeds)):
-      per_ep = evaluator.run(keys, 1.0, params=imitation.seed_params(res.params, i))
+      per_ep = evaluator.run(keys, 1.0, params=weights(res, i, temp))
       m = E.metrics(per_ep, env.entity_names, env.safe_threshold)
       per_seed.append({k: m[k] for k in ("completion", "safe_completion", "avg_health", "cost_mean")})
     t3 = time.perf_counter()
     t_train, t_eval = t_train + t2 - t1, t_eval + t3 - t2
     row = {"episodes": ds.num_episodes, "transitions": D.num_transitions(ds),
            "data_safe_fraction": float(np.mean(ds.safe)),
-           "final_loss": [float(x) for x in losses[:, -100:].mean(1)], "per_seed": per_seed}
+           "final_loss": [float(x) for x in losses[:, -100:].mean(1)], "per_seed": per_seed,
+           "temperature": temp, "validation_completion": {f"{t:g}": v for t, v in validation.items()}}
     for k in ("completion", "safe_completion", "avg_health"):
       row[k], row[k + "_ci95"] = interval([s[k] for s in per_seed])
     out["regimes"][name] = row
@@ -222,6 +260,14 @@ def run_task(task, args, log, save=lambda out: None):
   return out
 
 
+def _temp_label(row, payload) -> str:
+  """The flow policy's sampling temperature of a row (results written before the choice: the config's)."""
+  if payload["config"]["policy"] != "flow":
+    return "–"
+  t = row.get("temperature", payload["config"].get("temperature"))
+  return "–" if t is None or isinstance(t, list) else f"{t:g}"
+
+
 def write_md(path, payload):
   lines = [f"# Imitation learning with damage: data regimes ({payload['device']})", "",
            f"Date: {payload['date']}. Command: `{payload['command']}`", "",
@@ -229,21 +275,23 @@ def write_md(path, payload):
            f"Per task {payload['config']['demos']} episodes recorded per operator condition (successful ones "
            f"kept); {payload['config']['seeds']} training seeds; {payload['config']['eval_episodes']} evaluation "
            "episodes per (regime, seed). Values: mean over seeds ± half-width of the 95 % t-interval over seeds. "
+           "temp. = the flow policy's sampling temperature (with several configured, the one with the highest "
+           "completion on validation episodes). "
            "Safe completion = completed and every entity's final health > 95.", "",
            "| task | regime | demos | steps | data safe % | completion % | safe completion % | avg health "
-           "| per seed: completion / safe % |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "| per seed: completion / safe % | temp. |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
   for t in payload["tasks"]:
     for r, row in t["regimes"].items():
       if "skipped" in row:
-        lines.append(f"| {t['task']} | {REGIME_LABELS[r]} | 0 | 0 | – | – | – | – | skipped: {row['skipped']} |")
+        lines.append(f"| {t['task']} | {REGIME_LABELS[r]} | 0 | 0 | – | – | – | – | skipped: {row['skipped']} | – |")
         continue
       lines.append(f"| {t['task']} | {REGIME_LABELS[r]} | {row['episodes']} | {row['transitions']} | "
                    f"{100 * row['data_safe_fraction']:.0f} | {100 * row['completion']:.1f} ± "
                    f"{100 * row['completion_ci95']:.1f} | {100 * row['safe_completion']:.1f} ± "
                    f"{100 * row['safe_completion_ci95']:.1f} | {row['avg_health']:.1f} | "
                    + ", ".join(f"{100 * x['completion']:.0f} / {100 * x['safe_completion']:.0f}"
-                               for x in row["per_seed"]) + " |")
+                               for x in row["per_seed"]) + f" | {_temp_label(row, payload)} |")
   partial = [t["task"] for t in payload["tasks"] if t.get("complete") is False]
   if partial:
     lines += ["", f"Incomplete (the run ended before every regime was done): {', '.join(partial)}."]
@@ -346,6 +394,8 @@ def main(argv=None) -> int:
     return 0
   config = {k: getattr(args, k) for k in ("policy", "demos", "seeds", "eval_episodes", "steps", "batch",
                                           "max_damage", "min_health", "temperature")}
+  if len(args.temperature) > 1 and args.policy == "flow":
+    config["val_episodes"] = args.val_episodes
   config["hidden"] = list(args.hidden)
   slug, device = device_info()
   base = os.path.join(args.results_dir, f"il_study_{slug}{'_' + args.tag if args.tag else ''}")

@@ -41,3 +41,31 @@ def test_a_time_limit_keeps_the_finished_regimes_and_resume_redoes_the_task(tmp_
   (task,) = json.load(open(path))["tasks"]
   assert task["complete"] and list(task["regimes"]) == list(il.REGIMES) and calls == ["pick_egg", "pick_egg"]
   assert il.main(argv + ["--resume"]) == 0 and calls == ["pick_egg", "pick_egg"]  # complete: skipped
+
+
+def test_the_temperature_with_the_best_validation_completion_is_chosen_ties_to_the_lower():
+  assert il.choose_temperature({0.0: 0.2, 0.5: 0.6, 1.0: 0.4}) == 0.5
+  assert il.choose_temperature({1.0: 0.5, 0.0: 0.5, 0.5: 0.1}) == 0.0
+  assert il.choose_temperature({0.25: 0.0}) == 0.25
+
+
+@pytest.mark.parametrize("value", ["a", "-1", "nan", "", "0,inf"])
+def test_bad_temperatures_are_refused_naming_the_flag(value, capsys):
+  with pytest.raises(SystemExit) as e:
+    il.parse(["--temperature", value])
+  assert e.value.code == 2 and "--temperature" in capsys.readouterr().err
+
+
+def test_temperatures_default_to_the_grid_and_rows_show_the_chosen_one(tmp_path):
+  a = il.parse(["--quick"])
+  assert a.temperature == list(il.TEMPERATURES) and a.val_episodes == il.QUICK["val_episodes"]
+  assert il.parse(["--temperature", "0.5"]).temperature == [0.5]
+  payload = {"device": "cpu", "date": "d", "command": "c",
+             "config": {"policy": "flow", "demos": 4, "seeds": 1, "eval_episodes": 4, "temperature": [0.0, 1.0]},
+             "tasks": [{"task": "pick_egg", "recorded": RECORDED, "regimes": {"careful": dict(ROW, temperature=1.0)}}]}
+  il.write_md(tmp_path / "x.md", payload)
+  assert "| 100 / 50 | 1 |" in (tmp_path / "x.md").read_text()
+  old = dict(payload, config=dict(payload["config"], temperature=0.0),
+             tasks=[dict(payload["tasks"][0], regimes={"careful": ROW})])  # written before the choice existed
+  il.write_md(tmp_path / "y.md", old)
+  assert "| 100 / 50 | 0 |" in (tmp_path / "y.md").read_text()

@@ -132,11 +132,16 @@ def sample_chunk(net: VelocityMLP, params, obs, rng, action_size: int, chunk: in
 
 def flow_apply(action_size: int, chunk: int = CHUNK, hidden: Sequence[int] = (512, 512, 512),
                flow_steps: int = FLOW_STEPS, temperature: float = TEMPERATURE):
-  """``apply(params, state, rng) -> action f32[A]``: the first action of a fresh chunk (receding horizon)."""
+  """``apply(params, state, rng) -> action f32[A]``: the first action of a fresh chunk (receding horizon).
+
+  ``temperature=None``: read it from ``params["temperature"]`` (f32[]), so one compiled evaluator runs
+  any temperature (``benchmarks/il_study.py`` picks one per regime on validation episodes).
+  """
   net = VelocityMLP(chunk * action_size, tuple(hidden))
 
   def apply(params, state, rng):
-    c = sample_chunk(net, params, state.obs, rng, action_size, chunk, flow_steps, temperature)
+    temp = params["temperature"] if temperature is None else temperature
+    c = sample_chunk(net, params, state.obs, rng, action_size, chunk, flow_steps, temp)
     return jnp.clip(c[0], -1.0, 1.0)
 
   return apply
