@@ -108,12 +108,12 @@ def parse(argv):
   if args.temperature is None:
     args.temperature = list(TEMPERATURES)
   else:
+    from train.flow_policy import parse_temperatures
+
     try:
-      args.temperature = [float(t) for t in args.temperature.split(",") if t.strip()]
-    except ValueError:
-      p.error(f"--temperature: comma-separated numbers >= 0, got {args.temperature!r}")
-    if not args.temperature or not all(0.0 <= t < 100.0 for t in args.temperature):  # also refuses NaN
-      p.error(f"--temperature: comma-separated numbers in [0, 100), got {args.temperature}")
+      args.temperature = parse_temperatures(args.temperature)
+    except ValueError as e:
+      p.error(f"--temperature: {e}")
   if args.quick and args.tasks == ",".join(TASKS):
     args.tasks = ",".join(QUICK["tasks"])
   args.tasks = [t for t in args.tasks.split(",") if t]
@@ -199,13 +199,11 @@ def run_task(task, args, log, save=lambda out: None):
   log(f"{task}: recorded {recorded} in {out['timings']['record_s']:.0f} s")
   save(out)
 
-  import jax.numpy as jnp
-
   seeds = list(range(args.seeds))
   if args.policy == "flow":
     train = lambda ds: flow_policy.train_flow(ds, seeds, args.steps, args.batch, hidden=args.hidden)
     apply = flow_policy.flow_apply(env.action_size, flow_policy.CHUNK, args.hidden, temperature=None)
-    weights = lambda res, i, t: {**imitation.seed_params(res.params, i), "temperature": jnp.float32(t)}
+    weights = lambda res, i, t: flow_policy.with_temperature(imitation.seed_params(res.params, i), t)
     temperatures = args.temperature
   else:
     train = lambda ds: bc.train_bc(ds, seeds, args.steps, args.batch, hidden=args.hidden)

@@ -49,18 +49,17 @@ def parse(argv):
   for k in ("demos", "seeds", "steps", "eval_episodes"):
     if getattr(a, k) < 1:
       p.error(f"--{k.replace('_', '-')}: must be >= 1")
+  from train.flow_policy import parse_temperatures
+
   try:
-    a.temperature_list = [float(t) for t in a.temperatures.split(",") if t.strip()]
-  except ValueError:
-    p.error(f"--temperatures: comma-separated numbers, got {a.temperatures!r}")
-  if not a.temperature_list or not all(0.0 <= t < 100.0 for t in a.temperature_list):
-    p.error(f"--temperatures: comma-separated numbers in [0, 100), got {a.temperatures!r}")
+    a.temperature_list = parse_temperatures(a.temperatures)
+  except ValueError as e:
+    p.error(f"--temperatures: {e}")
   return a
 
 
 def main(argv=None) -> int:
   a = parse(argv)
-  import jax.numpy as jnp
   import numpy as np
 
   import tasks
@@ -83,7 +82,7 @@ def main(argv=None) -> int:
   for temp in a.temperature_list:
     per_seed = []
     for i in range(a.seeds):
-      params = {**imitation.seed_params(res.params, i), "temperature": jnp.float32(temp)}
+      params = flow_policy.with_temperature(imitation.seed_params(res.params, i), temp)
       m = E.metrics(ev.run(keys, 1.0, params=params), env.entity_names, env.safe_threshold)
       per_seed.append({k: float(m[k]) for k in ("completion", "safe_completion")})
     rows.append({"temperature": temp, "per_seed": per_seed,

@@ -147,6 +147,23 @@ def flow_apply(action_size: int, chunk: int = CHUNK, hidden: Sequence[int] = (51
   return apply
 
 
+def with_temperature(params, temperature: float):
+  """One seed's ``params`` with the sampling ``temperature`` a ``flow_apply(temperature=None)`` reads."""
+  return {**params, "temperature": jnp.float32(temperature)}
+
+
+def parse_temperatures(text: str) -> list[float]:
+  """Comma-separated sampling temperatures, each in [0, 100); ``ValueError`` (without the field's name,
+  which the caller adds) otherwise, NaN included."""
+  try:
+    temps = [float(t) for t in text.split(",") if t.strip()]
+  except ValueError:
+    raise ValueError(f"comma-separated numbers in [0, 100), got {text!r}") from None
+  if not temps or not all(0.0 <= t < 100.0 for t in temps):
+    raise ValueError(f"comma-separated numbers in [0, 100), got {text!r}")
+  return temps
+
+
 def flow_policy(res: FlowResult, seed_index: int = 0, flow_steps: int = FLOW_STEPS,
                 temperature: float = TEMPERATURE):
   """Seed ``seed_index``'s policy ``policy(state, rng) -> action`` (weights passed to the evaluator as data)."""
