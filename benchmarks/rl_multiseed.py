@@ -3,7 +3,7 @@
 For each method, ``train.train(task, seeds=S, time_limit=--budget-seconds)`` trains all
 seeds in one compiled program (vmap over the seed axis), with periodic deterministic
 evaluations (``--eval-envs`` episodes per seed) for the curves and the time to 80 %
-safe; then every seed's final deterministic policy is scored by ``train.evaluate`` on
+safe; then every seed's final policy is scored (its mode unless ``--eval-actions`` says) by ``train.evaluate`` on
 ``--eval-episodes`` episodes (seed 12345, the same key as benchmarks/rl_brax_ppo.py).
 Each row: mean ± std and min over seeds of completion, safe completion, avg env
 health, episode cost; time to ≥ 80 % safe (with ≥ 80 % completion); env-steps/s of
@@ -149,6 +149,11 @@ def parse(argv):
                  help="env steps per seed between periodic evaluations (each: S calls of --eval-envs episodes)")
   p.add_argument("--eval-envs", type=int, default=256, help="episodes per seed of each periodic evaluation")
   p.add_argument("--eval-episodes", type=int, default=1024, help="episodes per seed of the final evaluation")
+  p.add_argument("--eval-actions", default="mode",
+                 help="comma-separated actions of the final evaluation, each of mode (tanh of the Gaussian's "
+                      "mean: brax's deterministic policy), sample (the stochastic policy PPO trains) and mean "
+                      "(E[tanh(u)] from 32 draws; train.networks.policy_apply); the first is the row's headline, "
+                      "the others are kept per seed beside it")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   p.add_argument("--work-dir", default=None, help="run directories (default /tmp/rl_multiseed)")
   p.add_argument("--tag", default="", help="file-name suffix: rl_<task>_<device>_<tag>.{json,md}")
@@ -188,6 +193,11 @@ def parse(argv):
     if len(v) != 2 or not all(-10.0 <= x <= 2.0 for x in v):
       p.error(f"--init-log-std: two numbers ARM,GRIPPER in [-10, 2], got {args.init_log_std!r}")
     args.init_log_std = v
+  from train.networks import POLICY_ACTIONS
+  args.eval_actions = [a.strip() for a in args.eval_actions.split(",") if a.strip()]
+  if not args.eval_actions or len(set(args.eval_actions)) != len(args.eval_actions) or not set(
+      args.eval_actions) <= set(POLICY_ACTIONS):
+    p.error(f"--eval-actions: distinct values of {','.join(POLICY_ACTIONS)}, got {args.eval_actions}")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
   return args
@@ -253,24 +263,29 @@ def run_method(name: str, args, command: str, work: str) -> dict:
                     out_dir=run_dir, time_limit=args.budget_seconds, progress=True, **kw)
   env, _ = train.resolve_task(args.task, task_kwargs)
   t0 = time.perf_counter()
-  evaluator, finals = None, []
-  for s in args.seeds:  # one executable for all seeds: the weights are data
-    policy = train.load_policy(run_dir, seed=s)
-    if evaluator is None:
-      evaluator = E.Evaluator(env, E.parametrized_policy(policy.apply, None), res.config.episode_length)
-    per_ep = evaluator.run(E.episode_keys(EVAL_SEED, args.eval_episodes), 1.0, params=policy.params)
-    finals.append(E.scalar_metrics(E.metrics(per_ep, env.entity_names, train.ppo.safe_threshold_of(env))))
+  finals = {}  # action -> per-seed metrics, in args.seeds order
+  for action in args.eval_actions:
+    evaluator, finals[action] = None, []
+    for s in args.seeds:  # one executable for all seeds: the weights are data
+      policy = train.load_policy(run_dir, seed=s, action=action)
+      if evaluator is None:
+        evaluator = E.Evaluator(env, E.parametrized_policy(policy.apply, None), res.config.episode_length)
+      per_ep = evaluator.run(E.episode_keys(EVAL_SEED, args.eval_episodes), 1.0, params=policy.params)
+      finals[action].append(E.scalar_metrics(E.metrics(per_ep, env.entity_names, train.ppo.safe_threshold_of(env))))
   eval_s = time.perf_counter() - t0
   per_seed = []
-  for s, ev in zip(args.seeds, finals):
+  for i, s in enumerate(args.seeds):
     rows = [r for r in res.history if r["seed"] == s]
-    per_seed.append({"seed": s, "final_eval": ev, "time_to_80_safe_s": time_to_safe(rows),
+    per_seed.append({"seed": s, "final_eval": finals[args.eval_actions[0]][i],
+                     "final_eval_by_action": {a: finals[a][i] for a in args.eval_actions},
+                     "time_to_80_safe_s": time_to_safe(rows),
                      "final_lambda": rows[-1].get("lagrange") if rows else None})
   summary = {k: stats([p["final_eval"][k] for p in per_seed]) for k in METRICS}
   summary["time_to_80_safe_s"] = stats([p["time_to_80_safe_s"] for p in per_seed])
   curves = f"rl_{name}_curves.png"
   return {
-      "label": spec["label"], "method": name, "command": command, "train_kwargs": kw, "task_kwargs": task_kwargs,
+      "label": spec["label"], "method": name, "command": command, "eval_actions": list(args.eval_actions),
+      "train_kwargs": kw, "task_kwargs": task_kwargs,
       "config": res.config.to_json(), "seeds": list(args.seeds), "per_seed": per_seed, "summary": summary,
       "env_steps_per_seed": res.env_steps, "wall_time_s": res.wall_time, "train_time_s": res.train_time,
       "throughput_all_seeds": res.throughput if math.isfinite(res.throughput) else None,  # None: 1 iteration, none timed
@@ -297,10 +312,43 @@ def seeds_meeting(row: dict, safe: float = 0.8, completion: float = 0.9) -> int:
              for p in row["per_seed"])
 
 
+def _actions(row: dict) -> list:
+  return row.get("eval_actions") or ["mode"]  # rows written before the flag: the mode
+
+
+def _labelled(row: dict) -> str:
+  head = _actions(row)[0]
+  return row["label"] if head == "mode" else f"{row['label']}, {head} action"
+
+
+def _by_action(rows) -> list:
+  """The final evaluation under every action a row scored (rows with one action add nothing)."""
+  out = []
+  for r in rows:
+    if len(_actions(r)) < 2:
+      continue
+    for a in _actions(r):
+      evals = [p["final_eval_by_action"][a] for p in r["per_seed"]]
+      s = {k: stats([e[k] for e in evals]) for k in ("completion", "safe_completion", "episode_cost")}
+      meet = sum(e["safe_completion"] >= 0.8 and e["completion"] >= 0.9 for e in evals)
+      per = " / ".join(f"{e['safe_completion']:.1%}" for e in evals)
+      out.append(f"| {r['label']} | {a} | {_pm(s['completion'])} | {_pm(s['safe_completion'])} "
+                 f"| {meet}/{len(evals)} | {_pm(s['episode_cost'], False)} | {per} |")
+  if not out:
+    return []
+  return ["", "## Final policy by action", "",
+          "The same final weights scored with each action (train.networks.policy_apply): mode = tanh of the "
+          "Gaussian's mean (brax's deterministic policy); sample = one draw per step, the policy PPO trains; "
+          "mean = E[tanh(u)] from 32 draws per step.", "",
+          "| method | action | completion % | safe completion % | seeds ≥ 80/90 | episode cost | safe per seed |",
+          "|---|---|---|---|---|---|---|"] + out
+
+
 def write_results(base: str, payload: dict) -> None:
   io.write_json(base + ".json", payload, indent=1)
   lines = [f"# {payload['task']}: multi-seed safe RL ({payload['device']})", "",
-           f"Date: {payload['date']}. Evaluation: every seed's final deterministic policy on "
+           f"Date: {payload['date']}. Evaluation: every seed's final policy (its mode, brax's deterministic "
+           "policy, unless the method says which action) on "
            f"{payload['eval_episodes']} episodes (train.evaluate, key seed {EVAL_SEED}). Cells: mean ± std "
            "(min) over seeds, in % for rates. Safe completion = completed and every tracked entity's final "
            "health > 95. Time to 80 %: first periodic evaluation with ≥ 80 % safe and ≥ 80 % completion, "
@@ -310,6 +358,7 @@ def write_results(base: str, payload: dict) -> None:
            "| time to 80 % safe (s) | env-steps/s (all seeds) | env-steps per seed |",
            "|---|---|---|---|---|---|---|---|---|---|"]
   for r in payload["rows"]:
+    r = dict(r, label=_labelled(r))
     s, t = r["summary"], r["summary"]["time_to_80_safe_s"]
     t80 = "—" if t["mean"] is None else f"{t['mean']:.0f} ± {t['std']:.0f} ({t['n']}/{len(r['seeds'])})"
     lines.append(f"| {r['label']} | {','.join(map(str, r['seeds']))} | {_pm(s['completion'])} "
@@ -317,9 +366,11 @@ def write_results(base: str, payload: dict) -> None:
                  f"| {_pm(s['avg_env_health'], False)} "
                  f"| {_pm(s['episode_cost'], False)} | {t80} | {_rate(r['throughput_all_seeds'])} "
                  f"| {r['env_steps_per_seed']:,} |")
+  lines += _by_action(payload["rows"])
   lines += ["", "## Per seed", "", "| method | seed | completion | safe completion | avg env health | episode cost "
             "| time to 80 % safe (s) | final λ |", "|---|---|---|---|---|---|---|---|"]
   for r in payload["rows"]:
+    r = dict(r, label=_labelled(r))
     for p in r["per_seed"]:
       e, t = p["final_eval"], p["time_to_80_safe_s"]
       lam = "—" if p["final_lambda"] is None or "Lagrangian" not in r["label"] else f"{p['final_lambda']:.3g}"

@@ -24,9 +24,10 @@ TOY = ["--task", "train.experiments.pusher:PusherEnv", "--seeds", "0,1", "--num-
 def two_calls(tmp_path_factory):
   d = str(tmp_path_factory.mktemp("rl_ms"))
   # the paper preset's 128 env-steps per iteration (16 envs, rollout 8) → 2 iterations, as the others get
-  for methods, tag, steps in (("task_only,pid", "a", "2048"), ("paper", "b", "256")):
+  for methods, tag, steps, actions in (("task_only,pid", "a", "2048", "mode,sample,mean"),
+                                       ("paper", "b", "256", "sample")):
     assert rl_multiseed.main(TOY + ["--methods", methods, "--tag", tag, "--timesteps", steps, "--results-dir", d,
-                                    "--work-dir", d]) == 0
+                                    "--work-dir", d, "--eval-actions", actions]) == 0
   return d
 
 
@@ -48,6 +49,20 @@ def test_rows_have_per_seed_stats_and_commands(two_calls):
     assert {h["seed"] for h in r["history"]} == {0, 1}
   assert a["rows"][1]["config"]["multiplier"] == "pid" and a["rows"][1]["config"]["budget"] == 2.0
   assert os.path.isfile(os.path.join(two_calls, "rl_pusherenv_cpu_a_pid.png"))
+  for r in a["rows"]:  # the first action is the headline; every action is kept per seed
+    assert r["eval_actions"] == ["mode", "sample", "mean"]
+    for p in r["per_seed"]:
+      assert set(p["final_eval_by_action"]) == {"mode", "sample", "mean"}
+      assert p["final_eval_by_action"]["mode"] == p["final_eval"]
+  md = open(os.path.join(two_calls, "rl_pusherenv_cpu_a.md")).read()
+  assert "## Final policy by action" in md and md.count("| sample |") == 2
+
+
+def test_a_sampled_headline_says_so(two_calls):
+  b = _load(os.path.join(two_calls, "rl_pusherenv_cpu_b.json"))
+  assert b["rows"][0]["eval_actions"] == ["sample"]
+  md = open(os.path.join(two_calls, "rl_pusherenv_cpu_b.md")).read()
+  assert "penalty (w=2), sample action |" in md and "## Final policy by action" not in md
 
 
 def test_paper_preset_row(two_calls):

@@ -22,6 +22,9 @@ import rl_multiseed  # noqa: E402
     (["--lagrange-lr", "nan"], "--lagrange-lr"),
     (["--lagrange-init", "-1"], "--lagrange-init"),
     (["--methods", "ppo"], "--methods"),
+    (["--eval-actions", "greedy"], "--eval-actions"),
+    (["--eval-actions", "mode,mode"], "--eval-actions"),
+    (["--eval-actions", ","], "--eval-actions"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -48,3 +51,8 @@ def test_defaults_keep_the_earlier_methods():
                                                     multiplier="pid")
   assert rl_multiseed.method_spec("penalty", a) == dict(label="damage penalty (w=2)", preset="playground",
                                                         damage_weight=2.0)
+
+
+def test_eval_actions_default_to_the_mode():
+  assert rl_multiseed.parse([]).eval_actions == ["mode"]
+  assert rl_multiseed.parse(["--eval-actions", "sample,mode,mean"]).eval_actions == ["sample", "mode", "mean"]

@@ -132,8 +132,30 @@ def make_gradient_update(network, optimizer, cfg: PPOConfig, axis_name: Optional
   return gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=axis_name, has_aux=True)
 
 
-def policy_apply(make_policy, deterministic: bool):
-  """``apply(params, state, rng) -> action`` for one env (the form train.evaluate takes)."""
+POLICY_ACTIONS = ("mode", "sample", "mean")
+
+
+def policy_apply(make_policy, deterministic: bool = True, action: Optional[str] = None, mean_samples: int = 32):
+  """``apply(params, state, rng) -> action`` for one env (the form train.evaluate takes).
+
+  ``action`` (default from ``deterministic``: "mode" if True else "sample"):
+  - "mode": tanh of the Gaussian's mean (brax's deterministic policy);
+  - "sample": one draw of the tanh-squashed Gaussian, the policy PPO trains;
+  - "mean": the squashed distribution's mean E[tanh(u)], estimated from ``mean_samples`` draws. Not the
+    mode: tanh is not linear, so where the std is large the trained (sampled) policy moves less than
+    its mode on average (Jensen), and only this action reproduces the sampled policy's mean motion.
+  """
+  action = ("mode" if deterministic else "sample") if action is None else action
+  if action not in POLICY_ACTIONS:
+    raise ValueError(f"action: {action!r} is not one of {', '.join(POLICY_ACTIONS)}")
+  if isinstance(mean_samples, bool) or not isinstance(mean_samples, int) or mean_samples < 1:
+    raise ValueError(f"mean_samples: {mean_samples!r} must be a positive int")
+  if action == "mean":
+    def apply(params, state, rng):
+      draw = lambda k: make_policy(params, deterministic=False)(state.obs, k)[0]
+      return jnp.mean(jax.vmap(draw)(jax.random.split(rng, mean_samples)), axis=0)
+    return apply
+
   def apply(params, state, rng):
-    return make_policy(params, deterministic=deterministic)(state.obs, rng)[0]
+    return make_policy(params, deterministic=action == "mode")(state.obs, rng)[0]
   return apply

@@ -16,17 +16,21 @@ from train import networks as N
 from train.config import PPOConfig
 
 
-def load_policy(path: str, env=None, deterministic: bool = True, seed: Optional[int] = None):
+def load_policy(path: str, env=None, deterministic: bool = True, seed: Optional[int] = None,
+                action: Optional[str] = None):
   """A trained policy ``policy(state, rng) -> action`` for ONE env (``state.obs`` f32[O] → f32[A]).
 
   ``path``: a run directory or its ``checkpoint.npz``. ``seed``: which seed of a
   multi-seed run (a value from ``policy.meta["config"]["seeds"]``; default: the
-  first). Deterministic (the distribution's mode) unless ``deterministic=False``.
+  first). Deterministic (the distribution's mode) unless ``deterministic=False``; ``action`` ("mode",
+  "sample" or "mean", train.networks.policy_apply) overrides it.
   With ``env`` given, its observation and action sizes are checked against the
   checkpoint. ``policy.apply(params, state, rng)``/``policy.params`` expose the
   weights as data (train.evaluate passes them traced); ``policy.meta`` holds the
   run's config and ``policy.seed`` the seed loaded.
   """
+  if action is not None and action not in N.POLICY_ACTIONS:
+    raise ValueError(f"action: {action!r} is not one of {', '.join(N.POLICY_ACTIONS)}")
   path = os.fspath(path)
   file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
   if not os.path.isfile(file):
@@ -54,7 +58,8 @@ def load_policy(path: str, env=None, deterministic: bool = True, seed: Optional[
     params = ckpt.restore(file, one, "policy")
   params = jax.device_put(params)
   make_policy = ppo_networks.make_inference_fn(network)
-  policy = E.parametrized_policy(N.policy_apply(make_policy, deterministic), params)
+  policy = E.parametrized_policy(N.policy_apply(make_policy, deterministic, action), params)
   policy.meta = meta
   policy.seed = seed
+  policy.action = action or ("mode" if deterministic else "sample")
   return policy
