@@ -158,6 +158,9 @@ def parse(argv):
   p.add_argument("--work-dir", default=None, help="run directories (default /tmp/rl_multiseed)")
   p.add_argument("--tag", default="", help="file-name suffix: rl_<task>_<device>_<tag>.{json,md}")
   p.add_argument("--combine", nargs="+", metavar="FILE.json", help="no training: merge earlier results into one table")
+  p.add_argument("--headline-action", default=None,
+                 help="with --combine: score every row by this action of its final evaluation (rows must have "
+                      "scored it: --eval-actions); default: each row's own first action")
   args = p.parse_args(argv)
   if args.tag and not all(c.isalnum() or c in "_-" for c in args.tag):
     p.error(f"--tag: letters, digits, '_' and '-' only, got {args.tag!r}")
@@ -167,6 +170,9 @@ def parse(argv):
     for path in args.combine:
       if not os.path.isfile(path):
         p.error(f"--combine: no such file {path!r}")
+    from train.networks import POLICY_ACTIONS
+    if args.headline_action is not None and args.headline_action not in POLICY_ACTIONS:
+      p.error(f"--headline-action: one of {','.join(POLICY_ACTIONS)}, got {args.headline_action!r}")
     return args
   args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
   bad = [m for m in args.methods if m not in METHODS]
@@ -239,6 +245,22 @@ def stats(values):
           "n": int(v.size)}
 
 
+def summarise(per_seed) -> dict:
+  summary = {k: stats([p["final_eval"][k] for p in per_seed]) for k in METRICS}
+  summary["time_to_80_safe_s"] = stats([p["time_to_80_safe_s"] for p in per_seed])
+  return summary
+
+
+def with_headline(row: dict, action: str, source: str) -> dict:
+  """``row`` scored by ``action`` of its final evaluation (first in eval_actions, summary recomputed)."""
+  if action not in _actions(row) or any("final_eval_by_action" not in p for p in row["per_seed"]):
+    raise SystemExit(f"--headline-action: {source} row {row['label']!r} did not score the {action} action "
+                     f"(its actions: {','.join(_actions(row))})")
+  per_seed = [dict(p, final_eval=p["final_eval_by_action"][action]) for p in row["per_seed"]]
+  return dict(row, per_seed=per_seed, summary=summarise(per_seed),
+              eval_actions=[action] + [a for a in _actions(row) if a != action])
+
+
 def run_method(name: str, args, command: str, work: str) -> dict:
   import tasks
   import train
@@ -280,8 +302,7 @@ def run_method(name: str, args, command: str, work: str) -> dict:
                      "final_eval_by_action": {a: finals[a][i] for a in args.eval_actions},
                      "time_to_80_safe_s": time_to_safe(rows),
                      "final_lambda": rows[-1].get("lagrange") if rows else None})
-  summary = {k: stats([p["final_eval"][k] for p in per_seed]) for k in METRICS}
-  summary["time_to_80_safe_s"] = stats([p["time_to_80_safe_s"] for p in per_seed])
+  summary = summarise(per_seed)
   curves = f"rl_{name}_curves.png"
   return {
       "label": spec["label"], "method": name, "command": command, "eval_actions": list(args.eval_actions),
@@ -397,7 +418,10 @@ def combine(args) -> int:
     elif (src["device"], src["task"], src["eval_episodes"]) != (payload["device"], payload["task"],
                                                                  payload["eval_episodes"]):
       raise SystemExit(f"--combine: {path} is from another device/task/evaluation size than the first file")
-    payload["rows"] += src["rows"]
+    rows = src["rows"]
+    if args.headline_action:
+      rows = [with_headline(r, args.headline_action, os.path.basename(path)) for r in rows]
+    payload["rows"] += rows
     payload["sources"].append(os.path.basename(path))
   # Reruns of one command keep their own rows: number repeated labels so that neither hides the other.
   total, seen = collections.Counter(r["label"] for r in payload["rows"]), collections.Counter()

@@ -56,3 +56,28 @@ def test_defaults_keep_the_earlier_methods():
 def test_eval_actions_default_to_the_mode():
   assert rl_multiseed.parse([]).eval_actions == ["mode"]
   assert rl_multiseed.parse(["--eval-actions", "sample,mode,mean"]).eval_actions == ["sample", "mode", "mean"]
+
+
+def _row(actions=("mode", "sample")):
+  def ev(safe):
+    return {"completion": 1.0, "safe_completion": safe, "avg_env_health": 99.0, "episode_cost": 1.0}
+  per_seed = [{"seed": s, "final_eval": ev(0.5 + 0.2 * s), "time_to_80_safe_s": None, "final_lambda": None,
+               "final_eval_by_action": {"mode": ev(0.5 + 0.2 * s), "sample": ev(0.9)}} for s in range(3)]
+  return {"label": "damage penalty (w=2)", "eval_actions": list(actions), "per_seed": per_seed,
+          "summary": rl_multiseed.summarise(per_seed)}
+
+
+def test_headline_action_rescores_a_row_from_its_own_evaluations():
+  row = _row()
+  assert rl_multiseed.seeds_meeting(row) == 1  # the mode: 0.5 / 0.7 / 0.9 safe
+  s = rl_multiseed.with_headline(row, "sample", "f.json")
+  assert s["eval_actions"] == ["sample", "mode"] and rl_multiseed.seeds_meeting(s) == 3
+  assert s["summary"]["safe_completion"]["mean"] == 0.9 and abs(row["summary"]["safe_completion"]["mean"] - 0.7) < 1e-12
+  assert rl_multiseed._labelled(s).endswith(", sample action")
+
+
+def test_headline_action_refuses_a_row_that_never_scored_it():
+  with pytest.raises(SystemExit, match="f.json.*mean"):
+    rl_multiseed.with_headline(_row(), "mean", "f.json")
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(["--combine", __file__, "--tag", "x", "--headline-action", "greedy"])
