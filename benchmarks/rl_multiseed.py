@@ -120,6 +120,9 @@ def parse(argv):
   p.add_argument("--obs-mode", default=None,
                  help="task obs_mode (default: the task's RL setting, tasks.RL_SETTINGS — for place_plate the "
                       "paper's 6-d observation and in-hand start — else the task's own)")
+  p.add_argument("--task-settings", default=None, metavar="JSON",
+                 help="registered tasks: task keyword arguments over its RL setting (tasks.RL_SETTINGS), e.g. "
+                      "'{\"start\": \"pregrasp\"}'; rows record them")
   p.add_argument("--methods", default="task_only,penalty,lagrangian,pid", help=f"comma-separated of {','.join(METHODS)}")
   p.add_argument("--seeds", type=_ints, default=(0, 1, 2, 3, 4))
   p.add_argument("--preset", default="playground", help="preset of the non-paper methods (train/config.py)")
@@ -204,6 +207,16 @@ def parse(argv):
   if not args.eval_actions or len(set(args.eval_actions)) != len(args.eval_actions) or not set(
       args.eval_actions) <= set(POLICY_ACTIONS):
     p.error(f"--eval-actions: distinct values of {','.join(POLICY_ACTIONS)}, got {args.eval_actions}")
+  if args.task_settings is not None:
+    if ":" in args.task:
+      p.error("--task-settings: only for registered tasks, not package.module:EnvClass")
+    import tasks
+    try:
+      tasks.rl_settings(args.task, args.task_settings)
+    except ValueError as e:
+      p.error(f"--task-settings: {e}")
+    if any(k in json.loads(args.task_settings) for k in ("damage_weight", "obs_mode")):
+      p.error("--task-settings: damage_weight comes from the methods and obs_mode from --obs-mode")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
   return args
@@ -273,7 +286,7 @@ def run_method(name: str, args, command: str, work: str) -> dict:
   # start, Pick Egg's carry); --obs-mode overrides the observation
   task_kwargs = None
   if ":" not in args.task:
-    task_kwargs = dict(tasks.RL_SETTINGS.get(args.task, {}))
+    task_kwargs = tasks.rl_settings(args.task, args.task_settings)
     if args.obs_mode:
       task_kwargs["obs_mode"] = args.obs_mode
     task_kwargs = task_kwargs or None

@@ -81,3 +81,23 @@ def test_headline_action_refuses_a_row_that_never_scored_it():
     rl_multiseed.with_headline(_row(), "mean", "f.json")
   with pytest.raises(SystemExit):
     rl_multiseed.parse(["--combine", __file__, "--tag", "x", "--headline-action", "greedy"])
+
+
+@pytest.mark.parametrize("value", ['{"start": "teleport"}', "not json", '{"damage_weight": 1}', '["start"]',
+                                   '{"obs_mode": "paper"}'])
+def test_bad_task_settings_name_the_flag(value, capsys):
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(["--task", "pick_egg", "--task-settings", value])
+  assert "--task-settings" in capsys.readouterr().err
+
+
+def test_task_settings_reach_the_task_keywords(monkeypatch):
+  a = rl_multiseed.parse(["--task", "pick_egg", "--task-settings", '{"start": "pregrasp"}'])
+  import tasks
+  assert tasks.rl_settings(a.task, a.task_settings) == {"goal": "carry", "start": "pregrasp"}
+
+
+def test_task_settings_over_place_plates_rl_setting_keep_its_observation():
+  a = rl_multiseed.parse(["--task", "place_plate", "--task-settings", '{"n_substeps": 5}'])
+  import tasks
+  assert tasks.rl_settings(a.task, a.task_settings)["obs_mode"] == "paper"
