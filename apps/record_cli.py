@@ -47,7 +47,7 @@ def build_parser() -> Parser:
   p = Parser(prog="mjx-damage record", description=__doc__.split("\n\n")[0])
   p.add_argument("--task", required=True, help="registered task name")
   p.add_argument("--policy", required=True,
-                 help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint:RUN")
+                 help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint[+sample|+mean]:RUN")
   p.add_argument("--episodes", type=int, required=True, help="episodes to record")
   p.add_argument("--out", default=None, help="output .hdf5 (default: runs/record-<task>-<time>/demos.hdf5)")
   p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")

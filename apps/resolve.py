@@ -4,7 +4,7 @@ Tasks: the registry's (:func:`tasks.names`) and two built-in scenes, ``drop``
 (:class:`tasks.drop.DropEnv`, no actions) and ``push_boxes`` (4 boxes of
 :mod:`tasks.bench_table`, a 2-D pusher). Policies: ``scripted:safe``,
 ``scripted:unsafe`` (the task's scripted policy), ``random``, ``zero``,
-``checkpoint:PATH`` (a trained run, :func:`train.load_policy`). Every check
+``checkpoint[+sample|+mean]:PATH`` (a trained run, :func:`train.load_policy`, by its mode, a sample or its mean). Every check
 raises ``ValueError("task: …")``/``("policy: …")`` before anything is built.
 This is the one module that knows all the names, so it sits at the top.
 """
@@ -29,7 +29,10 @@ from train import checkpoint as ckpt
 from train import evaluate as E
 
 BACKENDS = ("auto", "mjx", "native")
-POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint:PATH")
+POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint[+sample|+mean]:PATH")
+# A trained policy's action (train.networks.policy_apply): its mode (brax's deterministic policy), one sample per
+# step (the stochastic policy PPO trains), or the squashed mean.
+CHECKPOINT_ACTIONS = {"checkpoint": "mode", "checkpoint+sample": "sample", "checkpoint+mean": "mean"}
 # Built-in scenes usable as tasks, with their episode lengths in env steps.
 BUILTIN_TASKS = {"drop": 50, "push_boxes": 50}
 
@@ -108,7 +111,11 @@ def episode_length_of(env, task: Optional[str] = None) -> int:
 
 
 def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
-  """``"scripted:safe"`` → ("scripted", "safe"); checks the spec's form (no env needed)."""
+  """``"scripted:safe"`` → ("scripted", "safe"); checks the spec's form (no env needed).
+
+  ``checkpoint:PATH``, ``checkpoint+sample:PATH`` and ``checkpoint+mean:PATH`` all give ("checkpoint", PATH);
+  :func:`checkpoint_action` tells them apart.
+  """
   if not isinstance(spec, str):
     raise ValueError(f"policy: expected a spec string ({', '.join(POLICY_SPECS)}), got {spec!r}")
   kind, _, arg = spec.partition(":")
@@ -116,11 +123,17 @@ def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
     return kind, None
   if kind == "scripted" and arg in ("safe", "unsafe"):
     return kind, arg
-  if kind == "checkpoint" and arg:
+  if kind in CHECKPOINT_ACTIONS and arg:
+    kind = "checkpoint"
     if not os.path.exists(arg):
       raise ValueError(f"policy: checkpoint {arg!r} does not exist")
     return kind, arg
   raise ValueError(f"policy: unknown policy {spec!r}; expected one of {', '.join(POLICY_SPECS)}")
+
+
+def checkpoint_action(spec: str) -> str:
+  """The action a ``checkpoint…:PATH`` spec asks for: "mode", "sample" or "mean"."""
+  return CHECKPOINT_ACTIONS[spec.partition(":")[0]]
 
 
 def make_policy(spec: str, env) -> E.Policy:
@@ -134,7 +147,7 @@ def make_policy(spec: str, env) -> E.Policy:
     return E.zero_policy(env.action_size)
   if kind == "scripted":
     return tasks.scripted_policy(env, arg)
-  return train.load_policy(arg, env)
+  return train.load_policy(arg, env, action=checkpoint_action(spec))
 
 
 # Source trees every program a command traces is built from (the program cache's key hashes them).

@@ -44,7 +44,7 @@ def build_parser() -> Parser:
   ap.add_argument("--task", required=True, help=f"task name (registry tasks, or built-in: {', '.join(R.BUILTIN_TASKS)})")
   ap.add_argument("--robot", default=None, help="robot of a registry task (default: the task's)")
   ap.add_argument("--policy", default=None,
-                  help="scripted:safe | scripted:unsafe | random | zero | checkpoint:RUN drives the robot "
+                  help="scripted:safe | scripted:unsafe | random | zero | checkpoint[+sample|+mean]:RUN drives the robot "
                        "(default: you, from the keyboard)")
   ap.add_argument("--record", default=None, metavar="FILE.hdf5",
                   help="append every finished episode to this dataset (created if missing; never overwritten)")

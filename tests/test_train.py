@@ -87,6 +87,26 @@ def test_smoke_train_checkpoint_load_evaluate(smoke, env):
   assert ev["episodes"] == 8 and 0.0 <= ev["avg_env_health"] <= 100.0
 
 
+def test_policy_specs_choose_the_checkpoints_action(smoke, env):
+  """``checkpoint:`` is the mode, ``checkpoint+sample:`` the trained stochastic policy, ``checkpoint+mean:``
+  the squashed mean; other suffixes are refused by name before anything loads."""
+  from apps import resolve as R
+  out = smoke.out_dir
+  state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+  k1, k2 = jax.random.PRNGKey(1), jax.random.PRNGKey(2)
+  for suffix, action in (("", "mode"), ("+sample", "sample"), ("+mean", "mean")):
+    spec = f"checkpoint{suffix}:{out}"
+    assert R.parse_policy_spec(spec) == ("checkpoint", out)
+    policy = R.make_policy(spec, env)
+    assert policy.action == action
+    a, b = jax.jit(policy)(state, k1), jax.jit(policy)(state, k2)
+    assert (action == "mode") == bool(np.array_equal(a, b))
+  np.testing.assert_array_equal(jax.jit(R.make_policy(f"checkpoint:{out}", env))(state, k1),
+                                jax.jit(train.load_policy(out, env))(state, k1))
+  with pytest.raises(ValueError, match="^policy: unknown policy 'checkpoint\\+greedy"):
+    R.parse_policy_spec(f"checkpoint+greedy:{out}")
+
+
 def test_seeds_in_one_program_equal_single_seed_runs(env):
   """S = 2 in one vmapped program gives each seed the run it gets alone (same keys, same config)."""
   kw = dict(budget=0.0, lagrange_lr=0.01, num_timesteps=3 * ITER, **TINY)
