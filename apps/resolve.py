@@ -5,7 +5,8 @@ Tasks: the registry's (:func:`tasks.names`) and two built-in scenes, ``drop``
 :mod:`tasks.bench_table`, a 2-D pusher). Policies: ``scripted:safe``,
 ``scripted:unsafe`` (the task's scripted policy), ``random``, ``zero``,
 ``checkpoint[+sample|+mean]:PATH`` (a trained run, :func:`train.load_policy`: its
-mode, a sample, or its mean). Every check raises ``ValueError("task: …")``/``("policy: …")`` before anything is built.
+mode, a sample, or its mean). Every check raises ``ValueError("task: …")``/``("policy: …")``
+before anything is built.
 This is the one module that knows all the names, so it sits at the top.
 """
 
