@@ -16,28 +16,28 @@ falling from the first measured episode cost to ĉ over ``--budget-anneal-steps`
 ``--cost-critic`` every damage-aware method uses separate reward and cost critics) — all with ``--preset`` (playground: MuJoCo Playground's PandaPickCube
 recipe) — and ``paper`` / ``paper_task_only`` (the paper's PPO settings, w = 2 / 0).
 
-GPU (one H100; one device call per method, each ≤ 10 min: ≤ 300 s training incl. compile + final
-evaluation), results in $OUT, then one table. The recipe that learns Place Plate (docs/safe_rl.md:
-the paper's per-dimension initial std, a cost critic, multipliers from λ0 = 2 with slow gains)::
+GPU: each method alone on one GPU for 300 s including compile, then the final evaluation; results in
+$OUT, then one table. The recipe that learns Place Plate (docs/safe_rl.md: the paper's per-dimension
+initial std, a cost critic, multipliers from λ0 = 2 with slow gains), every final policy scored by
+its mode, a sample and its squashed mean (the four ran at once, one per GPU of a 4-GPU host, with
+CUDA_VISIBLE_DEVICES=0..3)::
 
-    R="--init-log-std=-0.5,-1.5 --cost-critic --lagrange-init 2 --lagrange-lr 0.002 --pid-gains 0.01,0.002,0.005 --budget 1"
+    R="--init-log-std=-0.5,-1.5 --cost-critic --lagrange-init 2 --lagrange-lr 0.002 --pid-gains 0.01,0.002,0.005 --budget 1 --eval-actions mode,sample,mean --seeds 0,1,2,3,4 --budget-seconds 300"
     for m in task_only penalty lagrangian pid; do
-      python benchmarks/rl_multiseed.py --methods $m $R --seeds 0,1,2,3,4 --budget-seconds 300 --tag ${m}_ls_c1 --results-dir $OUT
+      python benchmarks/rl_multiseed.py --methods $m $R --tag ${m}_act2 --results-dir $OUT
     done
-    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid}_ls_c1.json --tag h100_c1
+    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_place_plate_<device>_{task_only,penalty,lagrangian,pid}_act2.json --tag h200_sample --headline-action sample
 
-(--budget only changes the Lagrangian methods. The committed table, rl_place_plate_combined_h100_c1.md,
-takes task_only (270 s) and penalty (245 s) from earlier calls, each row's command in the file.) Without the recipe flags the methods run with brax's initial std
-and λ0 = 0, lr 0.1, K = 0.1/0.01/0.05: the configuration whose collapse rl_collapse_evidence.md shows.
+(--budget only changes the Lagrangian methods.) Without the recipe flags the methods run with brax's
+initial std and λ0 = 0, lr 0.1, K = 0.1/0.01/0.05: the configuration whose collapse
+rl_collapse_evidence.md shows.
 
-Other tasks where the unsafe shortcut is tempting (issue 12 item 5; docs/rl_task_design.md), one
-call per method::
+Other tasks where the unsafe shortcut is tempting (issue 12 item 5; docs/rl_task_design.md), 3 seeds,
+one GPU per call::
 
-    python benchmarks/rl_multiseed.py --task pick_egg --methods task_only --seeds 0,1,2 --tag task_only --results-dir $OUT
-    for m in task_only penalty lagrangian; do
-      python benchmarks/rl_multiseed.py --task shelve_item --methods $m --seeds 0,1,2,3,4 --budget-seconds 300 --tag $m --results-dir $OUT
-    done
-    python benchmarks/rl_multiseed.py --combine benchmarks/results/rl_shelve_item_<device>_{task_only,penalty,lagrangian}.json --tag h100
+    R="--init-log-std=-0.5,-1.5 --cost-critic --eval-actions mode,sample --seeds 0,1,2 --budget-seconds 270"
+    python benchmarks/rl_multiseed.py --task shelve_item --methods task_only $R --tag task_only --results-dir $OUT
+    python benchmarks/rl_multiseed.py --task pick_egg --task-settings '{"start": "pregrasp"}' --methods penalty $R --tag pregrasp_penalty --results-dir $OUT
 
 CPU plumbing check (learns nothing)::
 
