@@ -7,9 +7,11 @@ published PPO settings for its PandaPickCube task
 minibatches, 8 updates per batch, unroll 10, γ 0.97, lr 1e-3, entropy 2e-2,
 observation normalisation, reward scaling 1, policy MLP 32×4, value MLP 256×5,
 10 resets per evaluation, 4 evaluations, action repeat 1), episode length =
-the task's. Each final deterministic policy is scored by
+the task's. Each final policy is scored by
 ``train.evaluate.evaluate(env, policy, episodes=1024, seed=12345)`` (DAMAGE_MODEL.md §7:
-completion, safe completion, average env health, episode cost).
+completion, safe completion, average env health, episode cost): by its mode (brax's deterministic
+policy), or with ``--eval-actions sample,mode`` as the sampled policy PPO trains too, the first
+action giving the row's columns (docs/safe_rl.md, "Which policy is scored").
 
 Rows go to ``benchmarks/results/rl_brax_<task>_<device>.{json,md}`` (or
 ``--out STEM``), one per (damage weight, seed), each with its exact command;
@@ -57,7 +59,7 @@ import tasks  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.evaluate import evaluate, parametrized_policy  # noqa: E402
-from train.networks import init_policy  # noqa: E402
+from train.networks import POLICY_ACTIONS, init_policy, policy_apply  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 RL_SETTINGS = tasks.RL_SETTINGS  # the setting each task is trained in (issue 24)
@@ -105,10 +107,12 @@ def network_factory(init_log_std: tuple[float, float] | None):
 
 
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
-              settings: dict | None = None) -> dict:
-  """One brax PPO run, then the 1024-episode evaluation of its deterministic policy; a result row.
+              settings: dict | None = None, actions=("mode",)) -> dict:
+  """One brax PPO run, then the 1024-episode evaluation of its final policy; a result row.
 
   ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
+  ``actions``: how the final policy acts (train.networks.policy_apply: mode = brax's deterministic
+  policy, sample, mean); the first gives the row's columns, every one is kept in ``by_action``.
   """
   settings = dict(RL_SETTINGS.get(task, {}) if settings is None else settings)
   env = tasks.make(task, damage_weight=weight, **settings)
@@ -145,20 +149,23 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   train_s = time.time() - t_start
 
   make_policy = last["make_policy"]
-
-  def apply(params, state, rng):
-    return make_policy(params, deterministic=True)(state.obs, rng)[0]
-
   t0 = time.time()
-  res = evaluate(env, parametrized_policy(apply, last["params"]), episodes=cfg["eval_episodes"], seed=EVAL_SEED)
-  m = res["metrics"]
+  by_action = {}
+  for action in actions:
+    res = evaluate(env, parametrized_policy(policy_apply(make_policy, action=action), last["params"]),
+                   episodes=cfg["eval_episodes"], seed=EVAL_SEED)
+    by_action[action] = res["metrics"]
+  m = by_action[actions[0]]
   return {
       "task": task, "task_settings": settings, "damage_weight": weight, "seed": seed,
       "reward": "task reward only" if weight == 0 else f"task + damage penalty, w = {weight:g}",
       "completion": m["completion"], "safe_completion": m["safe_completion"], "avg_env_health": m["avg_health"],
       "episode_cost": m["cost_mean"], "task_return": m.get("task_return"), "eval_episodes": m["episodes"],
       "env_steps": last["step"], "train_wall_s": round(train_s, 1), "eval_wall_s": round(time.time() - t0, 1),
-      "stopped_by_budget": stopped_early, "curve": curve,
+      "stopped_by_budget": stopped_early, "curve": curve, "eval_actions": list(actions),
+      "by_action": {a: {"completion": v["completion"], "safe_completion": v["safe_completion"],
+                        "avg_env_health": v["avg_health"], "episode_cost": v["cost_mean"]}
+                    for a, v in by_action.items()},
   }
 
 
@@ -171,6 +178,11 @@ def _settings_label(row: dict, doc: dict) -> str:
   """The row's task settings where they differ from the file's (the task's RL setting)."""
   s = row.get("task_settings", doc["task_settings"])
   return "" if s == doc["task_settings"] else ", task " + ", ".join(f"{k}={v}" for k, v in s.items())
+
+
+def _action_label(row: dict) -> str:
+  head = (row.get("eval_actions") or ["mode"])[0]  # rows written before the flag: the mode
+  return "" if head == "mode" else f", {head} action"
 
 
 def _key(row: dict):
@@ -187,8 +199,8 @@ def render_md(doc: dict) -> str:
       f"command line's overrides (last call: {', '.join(f'{k} {v}' for k, v in doc['recipe'].items())}; "
       f"policy MLP {'×'.join(map(str, POLICY_LAYERS[:1]))}×{len(POLICY_LAYERS)}, value MLP "
       f"{VALUE_LAYERS[0]}×{len(VALUE_LAYERS)}), episode length = the task's. Task settings: "
-      f"{doc['task_settings'] or 'defaults'}. Each final deterministic policy scored by "
-      f"`train.evaluate.evaluate` on the row's eval episodes (seed {EVAL_SEED}).",
+      f"{doc['task_settings'] or 'defaults'}. Each final policy (its mode, brax's deterministic policy, unless "
+      f"the row names the action) scored by `train.evaluate.evaluate` on the row's eval episodes (seed {EVAL_SEED}).",
       "",
       "| reward | seed | env-steps | train wall s (incl. compile) | completion | safe completion | avg env health "
       "| episode cost | eval episodes | command |",
@@ -196,10 +208,19 @@ def render_md(doc: dict) -> str:
   ]
   for r in doc["rows"]:
     lines.append(
-        f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
+        f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)}{_action_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
         f"| {r['eval_episodes']} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
+  several = [r for r in doc["rows"] if len(r.get("eval_actions", ())) > 1]
+  if several:
+    lines += ["", "Final policy by action (the same weights; mode = brax's deterministic policy, sample = one draw "
+              "per step, the policy PPO trains, mean = E[tanh(u)] from 32 draws):", "",
+              "| reward | seed | action | completion | safe completion | episode cost |", "|---|---|---|---|---|---|"]
+    for r in several:
+      for a, v in r["by_action"].items():
+        lines.append(f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} | {a} "
+                     f"| {100 * v['completion']:.1f} % | {100 * v['safe_completion']:.1f} % | {v['episode_cost']:.2f} |")
   if doc.get("notes"):
     lines += ["", *doc["notes"]]
   return "\n".join(lines) + "\n"
@@ -232,6 +253,10 @@ def parse_args(argv=None):
   p.add_argument("--num-eval-envs", type=int, default=pc["num_eval_envs"])
   p.add_argument("--num-resets-per-eval", type=int, default=pc["num_resets_per_eval"])
   p.add_argument("--eval-episodes", type=int, default=1024)
+  p.add_argument("--eval-actions", default="mode",
+                 help="comma-separated actions of the final evaluation: mode (brax's deterministic policy), sample "
+                      "(the stochastic policy PPO trains), mean (E[tanh(u)] from 32 draws); the first gives the "
+                      "row's columns, the others are listed below the table")
   p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
                  help="initial log-std of the policy (pre-tanh; gripper = last action dim), as our trainer's "
                       "--init-log-std; write --init-log-std=-0.5,-1.5. Default: brax's init (std ≈ 1.3)")
@@ -263,6 +288,9 @@ def parse_args(argv=None):
     a.init_log_std = tuple(_csv(a.init_log_std, float, "init_log_std"))
     if len(a.init_log_std) != 2 or not all(-5.0 <= v <= 2.0 for v in a.init_log_std):  # also refuses NaN
       raise ValueError(f"init_log_std: ARM,GRIPPER, each in [-5, 2], got {a.init_log_std}")
+  a.actions = tuple(x.strip() for x in a.eval_actions.split(",") if x.strip())
+  if not a.actions or len(set(a.actions)) != len(a.actions) or not set(a.actions) <= set(POLICY_ACTIONS):
+    raise ValueError(f"eval_actions: distinct values of {','.join(POLICY_ACTIONS)}, got {a.eval_actions!r}")
   a.settings = tasks.rl_settings(a.task, a.task_settings)
   if "damage_weight" in a.settings:
     raise ValueError("task_settings: damage_weight is set by --damage-weights, not here")
@@ -288,7 +316,7 @@ def main(argv=None) -> int:
   for w in a.weights:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
-      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings)
+      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "

@@ -63,3 +63,24 @@ def test_reward_preference_takes_the_same_task_settings():
   assert a.settings["place_plate"] == {**R.RL_SETTINGS["place_plate"], "episode_length": 60}
   with pytest.raises(ValueError, match="task_settings"):
     P.parse_args(["--tasks", "pick_egg", '--task-settings={"start": "midair"}'])
+
+
+@pytest.mark.parametrize("value", ["greedy", "mode,mode", ","])
+def test_bad_eval_actions_are_refused_naming_them(value):
+  with pytest.raises(ValueError, match="eval_actions"):
+    R.parse_args([f"--eval-actions={value}"])
+
+
+def test_rows_say_which_action_scored_them():
+  assert R.parse_args([]).actions == ("mode",)
+  assert R.parse_args(["--eval-actions", "sample,mode"]).actions == ("sample", "mode")
+  v = {"completion": 1.0, "safe_completion": 0.9, "avg_env_health": 99.0, "episode_cost": 1.0}
+  row = {"reward": "task reward only", "seed": 0, "env_steps": 10, "train_wall_s": 1.0, "stopped_by_budget": False,
+         "completion": 1.0, "safe_completion": 0.9, "avg_env_health": 99.0, "episode_cost": 1.0, "eval_episodes": 8,
+         "command": "c", "eval_actions": ["sample", "mode"], "by_action": {"sample": v, "mode": dict(v, safe_completion=0.5)}}
+  doc = {"task": "place_plate", "task_settings": {}, "device": "cpu", "recipe": {}, "rows": [row]}
+  md = R.render_md(doc)
+  assert "| task reward only, sample action | 0 |" in md
+  assert "| task reward only | 0 | mode | 100.0 % | 50.0 % |" in md
+  old = {k: x for k, x in row.items() if k not in ("eval_actions", "by_action")}  # before the flag: the mode
+  assert "| task reward only | 0 |" in R.render_md(dict(doc, rows=[old])) and "by action" not in R.render_md(dict(doc, rows=[old]))
