@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/task_stills.py                      # every registered task (skips rendered ones)
     .venv/bin/python benchmarks/task_stills.py --tasks place_plate pour_water --force
+    .venv/bin/python benchmarks/task_stills.py --robot panda --tasks shelve_item   # → docs/figures/tasks_panda
 
 For each task of ``tasks.names()`` (or ``--tasks``): ONE compiled rollout
 (:func:`mjx_damage.trajectory.rollout`, 2 envs: env 0 runs ``scripted:safe``,
@@ -48,7 +49,11 @@ from mjx_damage.trajectory import MODELS, mj_model_of, positive_int, rollout  # 
 from train.cliargs import Parser  # noqa: E402
 
 STYLES = ("safe", "unsafe")  # panel order, left to right
-DEFAULT_OUT = os.path.join(ROOT, "docs", "figures", "tasks")
+DEFAULT_OUT = os.path.join(ROOT, "docs", "figures", "tasks")  # the gripper's; other robots: tasks_<robot>
+
+
+def default_out(robot: str) -> str:
+  return DEFAULT_OUT if robot == "gripper" else f"{DEFAULT_OUT}_{robot}"
 MAX_SIDE = 2048  # px per panel: a still, not a poster
 HEADER_ROWS = 3  # policy + outcome, final health (may wrap to a second line)
 
@@ -57,7 +62,10 @@ def build_parser() -> Parser:
   ap = Parser(prog="task_stills.py", description=__doc__.splitlines()[0])
   ap.add_argument("--tasks", nargs="+", default=None, metavar="TASK",
                   help="tasks to render (default: every registered task, tasks.names())")
-  ap.add_argument("--out", default=DEFAULT_OUT, help="folder of the stills, their JSON and index.md")
+  ap.add_argument("--robot", default="gripper", help="robot of every task (tasks.robots_for; default gripper)")
+  ap.add_argument("--out", default=None,
+                  help="folder of the stills, their JSON and index.md (default docs/figures/tasks, or "
+                       "docs/figures/tasks_<robot> for another robot)")
   ap.add_argument("--seed", type=int, default=0, help="PRNG seed of the shared reset and the actions")
   ap.add_argument("--width", type=int, default=480, help="panel width, px")
   ap.add_argument("--height", type=int, default=360, help="panel height (rendered frame), px")
@@ -69,10 +77,18 @@ def build_parser() -> Parser:
 def check_args(args) -> list:
   """The tasks to render, in order; ``ValueError`` naming the field on bad input (nothing compiled yet)."""
   valid = tasks.names()
-  chosen = list(args.tasks) if args.tasks else valid
+  every_robot = sorted({r for t in valid for r in tasks.robots_for(t)})
+  if args.robot not in every_robot:
+    raise ValueError(f"robot: unknown robot {args.robot!r} (valid: {', '.join(every_robot)})")
+  if args.out is None:
+    args.out = default_out(args.robot)
+  chosen = list(args.tasks) if args.tasks else [t for t in valid if args.robot in tasks.robots_for(t)]
   unknown = [t for t in chosen if t not in valid]
   if unknown:
     raise ValueError(f"tasks: unknown task(s) {', '.join(unknown)} (valid: {', '.join(valid)})")
+  other = [t for t in chosen if args.robot not in tasks.robots_for(t)]
+  if other:
+    raise ValueError(f"robot: {', '.join(other)} run(s) without {args.robot!r} (tasks.robots_for)")
   if len(set(chosen)) != len(chosen):
     raise ValueError(f"tasks: listed twice: {', '.join(sorted({t for t in chosen if chosen.count(t) > 1}))}")
   for name in ("width", "height"):
@@ -189,17 +205,17 @@ def choose_camera(model, traj) -> mujoco.MjvCamera:
   return best
 
 
-def render_task(name: str, *, seed: int, width: int, height: int, steps=None) -> tuple:
+def render_task(name: str, *, seed: int, width: int, height: int, steps=None, robot: str = "gripper") -> tuple:
   """Roll out safe and unsafe from one reset (one compiled program), render both end states.
 
   Returns (image uint8[H', 2W + gap, 3], summary dict).
   """
-  env = tasks.make(name)
+  env = tasks.make(name, robot=robot)
   steps = steps or episode_length_of(env, name)
   policies = [tasks.scripted_policy(env, s) for s in STYLES]
   traj = rollout(env, policies, steps=steps, seed=seed, num_envs=len(STYLES), same_reset=True)
   model = mj_model_of(env)
-  panels, summary = [], {"task": name, "seed": seed, "steps": steps, "dt": traj.dt,
+  panels, summary = [], {"task": name, "robot": robot, "seed": seed, "steps": steps, "dt": traj.dt,
                          "entities": list(traj.entity_names), "policies": {}}
   camera = choose_camera(model, traj)
   summary["camera"] = {"lookat": [float(x) for x in camera.lookat], "distance": float(camera.distance),
@@ -223,15 +239,17 @@ def render_task(name: str, *, seed: int, width: int, height: int, steps=None) ->
 def command_of(name: str, args) -> str:
   """The command that renders ``name`` again as this run did (non-default options only)."""
   cmd = f"python benchmarks/task_stills.py --tasks {name}"
+  if args.robot != "gripper":
+    cmd += f" --robot {args.robot}"
   for opt, default in (("seed", 0), ("width", 480), ("height", 360), ("steps", None)):
     if getattr(args, opt) != default:
       cmd += f" --{opt} {getattr(args, opt)}"
-  if os.path.abspath(args.out) != os.path.abspath(DEFAULT_OUT):
+  if os.path.abspath(args.out) != os.path.abspath(default_out(args.robot)):
     cmd += f" --out {args.out}"
   return cmd + " --force"
 
 
-def write_index(out: str) -> str:
+def write_index(out: str, robot: str = "gripper") -> str:
   """``<out>/index.md``: every still present (from its JSON), one table row and one image per task."""
   summaries = []
   for path in sorted(glob.glob(os.path.join(out, "*.json"))):
@@ -239,9 +257,11 @@ def write_index(out: str) -> str:
       s = json.load(f)
     if os.path.isfile(os.path.join(out, f"{s['task']}.png")):
       summaries.append(s)
-  lines = ["# Task stills: scripted safe vs unsafe, end state", "",
-           f"Generated by `python benchmarks/task_stills.py` ({len(summaries)} of {len(tasks.names())} registered "
-           "tasks; each section gives the command that redoes it).", "",
+  runs = [t for t in tasks.names() if robot in tasks.robots_for(t)]
+  flag = "" if robot == "gripper" else f" --robot {robot}"
+  lines = [f"# Task stills: scripted safe vs unsafe, end state ({robot})", "",
+           f"Generated by `python benchmarks/task_stills.py{flag}` ({len(summaries)} of the {len(runs)} registered "
+           f"tasks that run with the {robot}; each section gives the command that redoes it).", "",
            "Each still: the task's scripted safe (left) and unsafe (right) policy from the same randomised",
            "reset, at the last step of the episode. Tracked links are tinted toward red by the health they",
            "lost; the bars give every entity's health (0-100).", "",
@@ -284,15 +304,16 @@ def main(argv=None) -> int:
       print(f"{name}: already rendered ({os.path.relpath(png, ROOT)}), skipped (--force redoes it)", flush=True)
       continue
     t0 = time.perf_counter()
-    img, summary = render_task(name, seed=args.seed, width=args.width, height=args.height, steps=args.steps)
+    img, summary = render_task(name, seed=args.seed, width=args.width, height=args.height, steps=args.steps,
+                               robot=args.robot)
     save_png(img, png)
     write_json(meta, {**summary, "command": command_of(name, args)})
-    write_index(args.out)
+    write_index(args.out, args.robot)
     line = "; ".join(f"{s}: {'completed' if p['completed'] else 'not completed'}, min health "
                      f"{min(p['final_health'].values()):.1f}" for s, p in summary["policies"].items())
     print(f"{name}: wrote {os.path.relpath(png, ROOT)} ({os.path.getsize(png) // 1024} kB) in "
           f"{time.perf_counter() - t0:.0f} s incl. compile; {line}", flush=True)
-  print(f"index: {os.path.relpath(write_index(args.out), ROOT)}")
+  print(f"index: {os.path.relpath(write_index(args.out, args.robot), ROOT)}")
   return 0
 
 

@@ -22,6 +22,8 @@ stills = load_benchmark("task_stills")
     (["--width", "0"], "width: must be a positive integer"),
     (["--steps", "0"], "steps: must be a positive integer"),
     (["--seed", "x"], "invalid int value"),
+    (["--robot", "unicycle"], "robot: unknown robot 'unicycle'"),
+    (["--robot", "panda", "--tasks", "navigate_and_pick"], "robot: navigate_and_pick run(s) without 'panda'"),
 ])
 def test_rejects_bad_arguments(args, message, capsys):
   with pytest.raises(SystemExit) as e:
@@ -110,3 +112,22 @@ def test_entity_pixels_counts_each_entitys_geoms():
   traj = SimpleNamespace(geom_link=np.array([0, 0, 1, -1]), link_entity=np.array([1, 0]))
   seg = np.array([[0, 1, 2, 3], [-1, -1, 2, 0]])
   np.testing.assert_array_equal(stills.entity_pixels(seg, traj, 2), [2, 3])
+
+
+def test_other_robots_get_their_own_folder_and_only_their_tasks():
+  args = stills.build_parser().parse_args(["--robot", "panda"])
+  chosen = stills.check_args(args)
+  assert args.out == stills.DEFAULT_OUT + "_panda"
+  assert "navigate_and_pick" not in chosen and "place_plate" in chosen
+  assert stills.command_of("place_plate", args) == ("python benchmarks/task_stills.py --tasks place_plate "
+                                                    "--robot panda --force")
+  gripper = stills.build_parser().parse_args([])
+  assert stills.check_args(gripper) == stills.tasks.names() and gripper.out == stills.DEFAULT_OUT
+
+
+def test_index_names_the_robot(tmp_path):
+  with open(tmp_path / "place_plate.json", "w") as f:
+    json.dump(_summary("place_plate", True, 12.5), f)
+  Image.new("RGB", (4, 4)).save(tmp_path / "place_plate.png")
+  text = open(stills.write_index(str(tmp_path), "panda")).read()
+  assert "(panda)" in text and "task_stills.py --robot panda`" in text
