@@ -54,16 +54,7 @@ def build_parser() -> Parser:
 
 def check_args(args) -> list:
   """The tasks, in order; ``ValueError`` naming the field (before anything compiles)."""
-  runs = [t for t in tasks.names() if ROBOT in tasks.robots_for(t)]
-  chosen = list(args.tasks) if args.tasks else runs
-  unknown = [t for t in chosen if t not in tasks.names()]
-  if unknown:
-    raise ValueError(f"tasks: unknown task(s) {', '.join(unknown)} (valid: {', '.join(tasks.names())})")
-  other = [t for t in chosen if t not in runs]
-  if other:
-    raise ValueError(f"tasks: {', '.join(other)} run(s) without the Panda (tasks.robots_for)")
-  if len(set(chosen)) != len(chosen):
-    raise ValueError("tasks: a task is listed twice")
+  chosen = tasks.select(args.tasks, ROBOT)
   positive_int("episodes", args.episodes)
   if not 0.0 < args.threshold <= 100.0:  # also refuses NaN
     raise ValueError(f"threshold: must be in (0, 100], got {args.threshold}")

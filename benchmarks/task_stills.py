@@ -76,21 +76,9 @@ def build_parser() -> Parser:
 
 def check_args(args) -> list:
   """The tasks to render, in order; ``ValueError`` naming the field on bad input (nothing compiled yet)."""
-  valid = tasks.names()
-  every_robot = sorted({r for t in valid for r in tasks.robots_for(t)})
-  if args.robot not in every_robot:
-    raise ValueError(f"robot: unknown robot {args.robot!r} (valid: {', '.join(every_robot)})")
+  chosen = tasks.select(args.tasks, args.robot)
   if args.out is None:
     args.out = default_out(args.robot)
-  chosen = list(args.tasks) if args.tasks else [t for t in valid if args.robot in tasks.robots_for(t)]
-  unknown = [t for t in chosen if t not in valid]
-  if unknown:
-    raise ValueError(f"tasks: unknown task(s) {', '.join(unknown)} (valid: {', '.join(valid)})")
-  other = [t for t in chosen if args.robot not in tasks.robots_for(t)]
-  if other:
-    raise ValueError(f"robot: {', '.join(other)} run(s) without {args.robot!r} (tasks.robots_for)")
-  if len(set(chosen)) != len(chosen):
-    raise ValueError(f"tasks: listed twice: {', '.join(sorted({t for t in chosen if chosen.count(t) > 1}))}")
   for name in ("width", "height"):
     v = positive_int(name, getattr(args, name))
     if not 64 <= v <= MAX_SIDE:

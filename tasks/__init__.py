@@ -175,6 +175,25 @@ def robots_for(name: str) -> list[str]:
   return [r for r in robots.names() if only is None or r in only]
 
 
+def select(chosen=None, robot: str = "gripper") -> list[str]:
+  """Task names for a script's ``--tasks`` with ``--robot``: ``chosen`` checked, in order, or (None) every
+  task ``robot`` runs. ``ValueError`` naming ``tasks`` or ``robot`` (before anything is built)."""
+  if robot not in robots.names():
+    raise ValueError(f"robot: unknown robot {robot!r} (valid: {', '.join(robots.names())})")
+  if chosen is None:
+    return [t for t in names() if robot in robots_for(t)]
+  chosen = list(chosen)
+  unknown = [t for t in chosen if t not in names()]
+  if unknown:
+    raise ValueError(f"tasks: unknown task(s) {', '.join(unknown)} (valid: {', '.join(names())})")
+  if len(set(chosen)) != len(chosen):
+    raise ValueError(f"tasks: listed twice: {', '.join(sorted({t for t in chosen if chosen.count(t) > 1}))}")
+  other = [t for t in chosen if robot not in robots_for(t)]
+  if other:
+    raise ValueError(f"robot: {', '.join(other)} run(s) without {robot!r} (tasks.robots_for)")
+  return chosen
+
+
 DESCRIPTION_FIELDS = ("name", "summary", "damage_modality", "tracked_entities", "unsafe_shortcut", "safe_strategy",
                       "horizon", "robot", "robots", "success_condition")
 

@@ -14,8 +14,8 @@ ENTITY = np.array([0, 1, 1, 1, 1, 1, 1])
 
 @pytest.mark.parametrize("argv, message", [
     (["--tasks", "no_such_task"], "tasks: unknown task(s) no_such_task"),
-    (["--tasks", "navigate_and_pick"], "tasks: navigate_and_pick run(s) without the Panda"),
-    (["--tasks", "pick_egg", "pick_egg"], "tasks: a task is listed twice"),
+    (["--tasks", "navigate_and_pick"], "robot: navigate_and_pick run(s) without 'panda'"),
+    (["--tasks", "pick_egg", "pick_egg"], "tasks: listed twice: pick_egg"),
     (["--episodes", "0"], "episodes: must be a positive integer"),
     (["--threshold", "nan"], "threshold: must be in (0, 100]"),
     (["--threshold", "150"], "threshold: must be in (0, 100]"),

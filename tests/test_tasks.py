@@ -55,3 +55,18 @@ def test_gripper_command_roundtrip():
     c = float(R.gripper_command_for_gap(g))
     q = R.Q_MIN + 0.5 * (c + 1) * (R.Q_MAX - R.Q_MIN)
     assert abs(float(R.gap(q)) - np.clip(g, float(R.gap(R.Q_MIN)), float(R.gap(R.Q_MAX)))) < 1e-6
+
+
+def test_select_checks_task_lists_for_a_robot():
+  import tasks as T
+  assert T.select(None, "gripper") == T.names()
+  panda = T.select(None, "panda")
+  assert "place_plate" in panda and "navigate_and_pick" not in panda
+  assert T.select(["pick_egg", "place_plate"], "panda") == ["pick_egg", "place_plate"]
+  for chosen, robot, message in ((["nope"], "gripper", "tasks: unknown task(s) nope"),
+                                 (["pick_egg", "pick_egg"], "gripper", "tasks: listed twice: pick_egg"),
+                                 (["navigate_and_pick"], "panda", "robot: navigate_and_pick run(s) without 'panda'"),
+                                 (None, "unicycle", "robot: unknown robot 'unicycle'")):
+    with pytest.raises(ValueError) as e:
+      T.select(chosen, robot)
+    assert str(e.value).startswith(message)
