@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     if args.out is not None:
       outputs.check_new([args.out], "--out", args.overwrite)
     out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
-    env = R.make_task(args.task)
+    env = R.make_task(args.task, **R.policy_task_kwargs(args.policy, args.task))  # a checkpoint's obs_mode …
     policy = R.make_policy(args.policy, env)
     backend = R.pick_backend(args.backend, env)
     env = R.on_backend(env, backend, min(args.native_envs, args.episodes))

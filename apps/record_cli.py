@@ -70,6 +70,8 @@ def main(argv=None) -> int:
         raise ValueError(f"{name}: must be >= 1, got {getattr(args, name)}")
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
+    # a checkpoint's task overrides (its obs_mode …), so the env matches the policy
+    overrides = {} if args.policy.startswith("operator:") else R.policy_task_kwargs(args.policy, args.task)
   except ValueError as e:
     ap.error(str(e))
   import jax  # after the argument checks: a bad command line answers without starting JAX
@@ -79,7 +81,7 @@ def main(argv=None) -> int:
   from train.record import record_chunks
 
   out = args.out or os.path.join(outputs.run_dir("record", args.task), "demos.hdf5")
-  env = R.make_task(args.task)
+  env = R.make_task(args.task, **overrides)
   policy = make_recorder_policy(args.policy, env)
   platform = jax.default_backend()
   print(f"record: task {args.task}, policy {args.policy}, {args.episodes} episodes, device {platform}; "

@@ -56,7 +56,7 @@ def main(argv=None) -> int:
   try:  # everything the user gave is checked before a task is built or compiled
     R.check_task(args.task)
     R.check_backend(args.backend)
-    kind, _ = R.parse_policy_spec(args.policy)
+    R.parse_policy_spec(args.policy)
     if args.out is not None:
       video.check_out(args.out)
       outputs.check_new([env_path(args.out, b, args.num_envs) for b in range(max(args.num_envs, 1))],
@@ -73,8 +73,7 @@ def main(argv=None) -> int:
       if args.plots is None:
         raise ValueError("training_log: needs --plots DIR to write the curves to")
       training_log.find_training_log(args.training_log)
-    task_kwargs = R.checkpoint_task_kwargs(args.policy, args.task) if kind == "checkpoint" else {}
-    env = R.make_task(args.task, **task_kwargs)
+    env = R.make_task(args.task, **R.policy_task_kwargs(args.policy, args.task))
     policy = R.make_policy(args.policy, env)
     args.backend = R.pick_backend(args.backend, env)  # auto → the backend used, as printed and recorded
     env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env

@@ -176,6 +176,12 @@ def add_task_policy_arguments(ap) -> None:
   ap.add_argument("--policy", required=True, help=" | ".join(POLICY_SPECS))
 
 
+def policy_task_kwargs(policy_spec: str, task: str) -> dict:
+  """Task overrides the policy needs: a checkpoint's (:func:`checkpoint_task_kwargs`), else none."""
+  kind, _ = parse_policy_spec(policy_spec)
+  return checkpoint_task_kwargs(policy_spec, task) if kind == "checkpoint" else {}
+
+
 def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
   """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
   path = policy_spec.partition(":")[2]

@@ -69,7 +69,8 @@ def build_parser() -> Parser:
 def _check(args) -> dict:
   """Every user input checked before a task is built or anything compiles; returns the make() overrides."""
   R.check_task(args.task)
-  kind = R.parse_policy_spec(args.policy)[0] if args.policy is not None else None
+  if args.policy is not None:
+    R.parse_policy_spec(args.policy)
   for name in ("episode_length", "episodes", "steps"):
     v = getattr(args, name)
     if v is not None and v < 1:
@@ -86,7 +87,7 @@ def _check(args) -> dict:
     if not args.record.lower().endswith((".hdf5", ".h5")):
       raise ValueError(f"record: must end in .hdf5 or .h5, got {args.record!r}")
     outputs.check_writable(args.record, "--record")
-  overrides = R.checkpoint_task_kwargs(args.policy, args.task) if kind == "checkpoint" else {}
+  overrides = R.policy_task_kwargs(args.policy, args.task) if args.policy is not None else {}
   if args.robot is not None:
     if args.task in R.BUILTIN_TASKS:
       raise ValueError(f"robot: built-in scene {args.task!r} has no robot choice")

@@ -248,3 +248,34 @@ def test_metrics_follow_damage_model_definitions():
   assert m["entity_health"] == {"plate": 72.5, "robot": 99.75} and m["entity_health_min"]["plate"] == 0
   assert E.metrics(pe, ["plate", "robot"], safe_threshold=99.5)["safe_completion"] == 0.25
   assert "safe completion (SC, health > 95)  50.0 %" in E.format_table(m)
+
+
+def _fake_checkpoint(tmp_path, task, task_kwargs):
+  """A checkpoint file with only the metadata the CLIs read before building the env."""
+  from train import checkpoint as ckpt
+  path = str(tmp_path / "checkpoint.npz")
+  ckpt.save(path, {}, {}, {"task": task, "task_kwargs": task_kwargs})
+  return str(tmp_path)
+
+
+def test_policy_task_kwargs_are_the_checkpoints(tmp_path):
+  run = _fake_checkpoint(tmp_path, "place_plate", {"obs_mode": "paper"})
+  for spec in (f"checkpoint:{run}", f"checkpoint+sample:{run}"):
+    assert resolve.policy_task_kwargs(spec, "place_plate") == {"obs_mode": "paper"}
+  assert resolve.policy_task_kwargs("scripted:safe", "place_plate") == {}
+  with pytest.raises(ValueError, match="trained on task 'place_plate', not 'pick_egg'"):
+    resolve.policy_task_kwargs(f"checkpoint:{run}", "pick_egg")
+
+
+@pytest.mark.parametrize("cli", ["eval", "record"])
+def test_eval_and_record_build_the_env_the_checkpoint_was_trained_on(tmp_path, cli, capsys):
+  """They read the checkpoint's task before building anything: one of another task is refused by name."""
+  from apps import record_cli
+  run = _fake_checkpoint(tmp_path, "place_plate", {"obs_mode": "paper"})
+  main = {"eval": eval_cli.main, "record": record_cli.main}[cli]
+  argv = ["--task", "pick_egg", "--policy", f"checkpoint:{run}", "--episodes", "2"]
+  if cli == "record":
+    argv += ["--out", str(tmp_path / "d.hdf5")]
+  with pytest.raises(SystemExit) as e:
+    main(argv)
+  assert e.value.code == 2 and "trained on task 'place_plate', not 'pick_egg'" in capsys.readouterr().err
