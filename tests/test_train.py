@@ -107,6 +107,20 @@ def test_policy_specs_choose_the_checkpoints_action(smoke, env):
     R.parse_policy_spec(f"checkpoint+greedy:{out}")
 
 
+def test_a_checkpoint_for_another_observation_is_refused_with_its_task_overrides(smoke, monkeypatch):
+  import collections
+  from train import checkpoint as ckpt
+  State = collections.namedtuple("State", "obs")
+  other = types.SimpleNamespace(reset=lambda key: State(jnp.zeros((99,))), action_size=1)
+  with pytest.raises(ValueError, match=r"^env: observation/action sizes \(99, 1\) differ") as e:
+    train.load_policy(smoke.out_dir, env=other)
+  assert "task overrides" not in str(e.value)  # this run had none
+  read = ckpt.read_meta
+  monkeypatch.setattr(ckpt, "read_meta", lambda f: {**read(f), "task_kwargs": {"obs_mode": "paper"}})
+  with pytest.raises(ValueError, match=r"trained with task overrides \{'obs_mode': 'paper'\}"):
+    train.load_policy(smoke.out_dir, env=other)
+
+
 def test_seeds_in_one_program_equal_single_seed_runs(env):
   """S = 2 in one vmapped program gives each seed the run it gets alone (same keys, same config)."""
   kw = dict(budget=0.0, lagrange_lr=0.01, num_timesteps=3 * ITER, **TINY)

@@ -45,8 +45,10 @@ def load_policy(path: str, env=None, deterministic: bool = True, seed: Optional[
   if env is not None:
     e_obs = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape[-1]
     if (e_obs, env.action_size) != (obs_size, action_size):
+      trained = meta.get("task_kwargs") or {}
+      hint = f" (the run was trained with task overrides {trained}: build the env with them)" if trained else ""
       raise ValueError(f"env: observation/action sizes {(e_obs, env.action_size)} differ from the "
-                       f"checkpoint's {(obs_size, action_size)}")
+                       f"checkpoint's {(obs_size, action_size)}{hint}")
   network = N.make_networks(obs_size, action_size, cfg)
   one = jax.eval_shape(lambda: (running_statistics.init_state(jnp.zeros((obs_size,), jnp.float32)),
                                 network.policy_network.init(jax.random.PRNGKey(0))))
