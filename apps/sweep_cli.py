@@ -10,6 +10,7 @@ process, and process 0 writes --out (:mod:`train.distributed`).
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -53,6 +54,20 @@ def build_parser() -> Parser:
   return ap
 
 
+def task_overrides(task: str, policies) -> dict:
+  """The task overrides the sweep's checkpoints of ``task`` were trained with (their obs_mode …): one env
+  serves every policy of a task, so the checkpoints must agree; a checkpoint of another task is refused."""
+  found = {}
+  for p in policies:
+    if R.parse_policy_spec(p)[0] == "checkpoint":
+      found[p] = R.policy_task_kwargs(p, task)
+  kinds = {json.dumps(k, sort_keys=True, default=repr) for k in found.values()}
+  if len(kinds) > 1:
+    raise ValueError(f"policies: the checkpoints were trained with different overrides of {task!r} "
+                     f"({'; '.join(f'{p}: {k}' for p, k in found.items())}); sweep them separately")
+  return next(iter(found.values()), {})
+
+
 def main(argv=None) -> int:
   argv = list(sys.argv[1:] if argv is None else argv)
   ap = build_parser()
@@ -78,6 +93,7 @@ def main(argv=None) -> int:
       R.check_task(t)
     for p in policies:
       R.parse_policy_spec(p)
+    overrides = {t: task_overrides(t, policies) for t in tasks}
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
     if setup.multi_process and args.out is None:
@@ -127,7 +143,7 @@ def main(argv=None) -> int:
   backends = {}  # task → the backend it runs on (auto picks per task); S.sweep makes every env first
 
   def make_env(task):
-    env = R.make_task(task)
+    env = R.make_task(task, **overrides[task])
     backends[task] = R.pick_backend(args.backend, env, len(devices) * jax.process_count())
     return R.on_backend(env, backends[task], native_envs)
 
