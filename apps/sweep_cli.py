@@ -10,7 +10,6 @@ process, and process 0 writes --out (:mod:`train.distributed`).
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -61,11 +60,11 @@ def task_overrides(task: str, policies) -> dict:
   for p in policies:
     if R.parse_policy_spec(p)[0] == "checkpoint":
       found[p] = R.policy_task_kwargs(p, task)
-  kinds = {json.dumps(k, sort_keys=True, default=repr) for k in found.values()}
-  if len(kinds) > 1:
+  first = next(iter(found.values()), {})
+  if any(k != first for k in found.values()):
     raise ValueError(f"policies: the checkpoints were trained with different overrides of {task!r} "
                      f"({'; '.join(f'{p}: {k}' for p, k in found.items())}); sweep them separately")
-  return next(iter(found.values()), {})
+  return first
 
 
 def main(argv=None) -> int:

@@ -214,10 +214,10 @@ def run_task(task, args, log, save=lambda out: None):
   keys = E.episode_keys(0, args.eval_episodes)
   val_keys = E.episode_keys(VAL_SEED, args.val_episodes)
 
-  def completion(res, keys, t):
-    """Mean completion over the seeds at temperature ``t`` on episodes ``keys``."""
-    per_ep = [evaluator.run(keys, 1.0, params=weights(res, i, t)) for i in range(len(seeds))]
-    return float(np.mean([E.metrics(p, env.entity_names, env.safe_threshold)["completion"] for p in per_ep]))
+  def seed_metrics(res, keys, t):
+    """Every seed's metrics at temperature ``t`` on episodes ``keys``."""
+    return [E.metrics(evaluator.run(keys, 1.0, params=weights(res, i, t)), env.entity_names, env.safe_threshold)
+            for i in range(len(seeds))]
 
   t_train = t_eval = 0.0
   for name, ds in regimes(demos["careful"], demos["careless"], args).items():
@@ -231,15 +231,13 @@ def run_task(task, args, log, save=lambda out: None):
     losses = np.asarray(res.losses)
     t2 = time.perf_counter()
     log(f"{task} / {name}: trained in {t2 - t1:.0f} s; evaluating")
-    validation = {t: completion(res, val_keys, t) for t in temperatures} if len(temperatures) > 1 else {}
+    validation = ({t: float(np.mean([m["completion"] for m in seed_metrics(res, val_keys, t)]))
+                   for t in temperatures} if len(temperatures) > 1 else {})
     temp = choose_temperature(validation) if validation else temperatures[0]
     if validation:
       log(f"{task} / {name}: validation completion by temperature {validation}: {temp:g}")
-    per_seed = []
-    for i in range(len(seeds)):
-      per_ep = evaluator.run(keys, 1.0, params=weights(res, i, temp))
-      m = E.metrics(per_ep, env.entity_names, env.safe_threshold)
-      per_seed.append({k: m[k] for k in ("completion", "safe_completion", "avg_health", "cost_mean")})
+    per_seed = [{k: m[k] for k in ("completion", "safe_completion", "avg_health", "cost_mean")}
+                for m in seed_metrics(res, keys, temp)]
     t3 = time.perf_counter()
     t_train, t_eval = t_train + t2 - t1, t_eval + t3 - t2
     row = {"episodes": ds.num_episodes, "transitions": D.num_transitions(ds),

@@ -165,6 +165,7 @@ def parse(argv):
                  help="with --combine: score every row by this action of its final evaluation (rows must have "
                       "scored it: --eval-actions); default: each row's own first action")
   args = p.parse_args(argv)
+  from train.networks import POLICY_ACTIONS  # after argparse: --help answers without importing JAX
   if args.tag and not all(c.isalnum() or c in "_-" for c in args.tag):
     p.error(f"--tag: letters, digits, '_' and '-' only, got {args.tag!r}")
   if args.combine:
@@ -173,7 +174,6 @@ def parse(argv):
     for path in args.combine:
       if not os.path.isfile(path):
         p.error(f"--combine: no such file {path!r}")
-    from train.networks import POLICY_ACTIONS
     if args.headline_action is not None and args.headline_action not in POLICY_ACTIONS:
       p.error(f"--headline-action: one of {','.join(POLICY_ACTIONS)}, got {args.headline_action!r}")
     return args
@@ -202,7 +202,6 @@ def parse(argv):
     if len(v) != 2 or not all(-10.0 <= x <= 2.0 for x in v):
       p.error(f"--init-log-std: two numbers ARM,GRIPPER in [-10, 2], got {args.init_log_std!r}")
     args.init_log_std = v
-  from train.networks import POLICY_ACTIONS
   args.eval_actions = [a.strip() for a in args.eval_actions.split(",") if a.strip()]
   if not args.eval_actions or len(set(args.eval_actions)) != len(args.eval_actions) or not set(
       args.eval_actions) <= set(POLICY_ACTIONS):
