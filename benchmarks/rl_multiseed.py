@@ -39,6 +39,14 @@ one GPU per call::
     python benchmarks/rl_multiseed.py --task shelve_item --methods task_only $R --tag task_only --results-dir $OUT
     python benchmarks/rl_multiseed.py --task pick_egg --task-settings '{"start": "pregrasp"}' --methods penalty $R --tag pregrasp_penalty --results-dir $OUT
 
+The paper's PPO settings (issue 24's third trainer: the paper's ≈ 195 updates of 512-step rollouts,
+here 256 envs per seed) run longer than one device call, so the run lives in --work-dir and each later
+call continues it with --resume (the row lists every call)::
+
+    P="--work-dir runs/rl_paper --paper-timesteps 25559040 --eval-actions sample,mode --seeds 0,1,2 --budget-seconds 480"
+    python benchmarks/rl_multiseed.py --methods paper_task_only $P --tag paper_task_only --results-dir $OUT
+    python benchmarks/rl_multiseed.py --methods paper_task_only $P --resume --tag paper_task_only --results-dir $OUT
+
 CPU plumbing check (learns nothing)::
 
     python benchmarks/rl_multiseed.py --num-envs 16 --budget-seconds 60 --seeds 0,1 --eval-episodes 16
@@ -159,6 +167,9 @@ def parse(argv):
                       "the others are kept per seed beside it")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   p.add_argument("--work-dir", default=None, help="run directories (default /tmp/rl_multiseed)")
+  p.add_argument("--resume", action="store_true",
+                 help="continue each method's run in --work-dir from its checkpoint for another --budget-seconds "
+                      "(a run longer than one device call); the row lists every call's command")
   p.add_argument("--tag", default="", help="file-name suffix: rl_<task>_<device>_<tag>.{json,md}")
   p.add_argument("--combine", nargs="+", metavar="FILE.json", help="no training: merge earlier results into one table")
   p.add_argument("--headline-action", default=None,
@@ -218,6 +229,8 @@ def parse(argv):
       p.error("--task-settings: damage_weight comes from the methods and obs_mode from --obs-mode")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
+  if args.resume and not args.work_dir:
+    p.error("--resume: give --work-dir, the folder of the runs to continue")
   return args
 
 
@@ -292,9 +305,18 @@ def run_method(name: str, args, command: str, work: str) -> dict:
   run_dir = os.path.join(work, name)
   print(f"== {name}: {spec['label']}, seeds {list(args.seeds)}, {args.budget_seconds:.0f} s", flush=True)
   steps = min(args.timesteps, args.paper_timesteps) if spec["preset"] == "paper" else args.timesteps
+  calls_path = os.path.join(run_dir, "calls.json")
+  calls = []
+  if args.resume and os.path.exists(calls_path):
+    with open(calls_path) as f:
+      calls = json.load(f)
   res = train.train(args.task, task_kwargs=task_kwargs, seeds=args.seeds, num_timesteps=int(steps),
                     eval_every=int(args.eval_every), num_eval_envs=args.eval_envs, checkpoint_every=0,
-                    out_dir=run_dir, time_limit=args.budget_seconds, progress=True, **kw)
+                    out_dir=run_dir, time_limit=args.budget_seconds, progress=True, resume=args.resume, **kw)
+  calls.append({"command": command, "date": time.strftime("%Y-%m-%d %H:%M"), "device": device_info()[1],
+                "iterations_at_end": res.iterations, "env_steps_per_seed_at_end": res.env_steps,
+                "wall_time_s": round(res.wall_time, 1)})
+  io.write_json(calls_path, calls, indent=1)
   env, _ = train.resolve_task(args.task, task_kwargs)
   t0 = time.perf_counter()
   finals = {}  # action -> per-seed metrics, in args.seeds order
@@ -317,7 +339,8 @@ def run_method(name: str, args, command: str, work: str) -> dict:
   summary = summarise(per_seed)
   curves = f"rl_{name}_curves.png"
   return {
-      "label": spec["label"], "method": name, "command": command, "eval_actions": list(args.eval_actions),
+      "label": spec["label"], "method": name, "command": command, "calls": calls,
+      "eval_actions": list(args.eval_actions),
       "train_kwargs": kw, "task_kwargs": task_kwargs,
       "config": res.config.to_json(), "seeds": list(args.seeds), "per_seed": per_seed, "summary": summary,
       "env_steps_per_seed": res.env_steps, "wall_time_s": res.wall_time, "train_time_s": res.train_time,
@@ -385,7 +408,7 @@ def write_results(base: str, payload: dict) -> None:
            f"{payload['eval_episodes']} episodes (train.evaluate, key seed {EVAL_SEED}). Cells: mean ± std "
            "(min) over seeds, in % for rates. Safe completion = completed and every tracked entity's final "
            "health > 95. Time to 80 %: first periodic evaluation with ≥ 80 % safe and ≥ 80 % completion, "
-           "s from the start of training (compile incl.); 'n/S' seeds got there. Seeds ≥ 80/90: seeds whose "
+           "s of training (compile incl.; summed over the calls of a resumed run); 'n/S' seeds got there. Seeds ≥ 80/90: seeds whose "
            "final policy has ≥ 80 % safe completion and ≥ 90 % completion.", "",
            "| method | seeds | completion % | safe completion % | seeds ≥ 80/90 | avg env health | episode cost "
            "| time to 80 % safe (s) | env-steps/s (all seeds) | env-steps per seed |",
@@ -410,8 +433,13 @@ def write_results(base: str, payload: dict) -> None:
       lines.append(f"| {r['label']} | {p['seed']} | {e['completion']:.1%} | {e['safe_completion']:.1%} "
                    f"| {e['avg_env_health']:.2f} | {e['episode_cost']:.2f} | {'—' if t is None else f'{t:.0f}'} "
                    f"| {lam} |")
-  lines += ["", "## Commands", ""] + [f"- {r['label']}: `{r['command']}` ({r['date']}, curves `{r['curves']}`)"
-                                        for r in payload["rows"]]
+  lines += ["", "## Commands", ""]
+  for r in payload["rows"]:
+    lines.append(f"- {r['label']}: `{r['command']}` ({r['date']}, curves `{r['curves']}`)")
+    if len(r.get("calls", [])) > 1:  # a run continued over several calls (--resume)
+      lines += [f"  - call {i}: `{c['command']}` ({c['date']}, {c['device']}; iteration {c['iterations_at_end']}, "
+                f"{c['env_steps_per_seed_at_end']:,} env steps per seed at its end, {c['wall_time_s']:.0f} s)"
+                for i, c in enumerate(r["calls"], 1)]
   lines += ["", "## Settings per method", ""]
   for r in payload["rows"]:
     lines += [f"- {r['label']}: `{json.dumps(r['config'])}`"]

@@ -65,6 +65,23 @@ def test_a_sampled_headline_says_so(two_calls):
   assert "penalty (w=2), sample action |" in md and "## Final policy by action" not in md
 
 
+def test_resume_continues_a_run_over_calls(two_calls, tmp_path):
+  """A run longer than one device call: --resume continues the method's run in --work-dir; the row lists
+  both calls, its history goes on with the first call's rows, and time keeps counting across calls."""
+  argv = TOY + ["--methods", "paper", "--tag", "c", "--results-dir", str(tmp_path), "--work-dir", two_calls,
+                "--eval-actions", "sample", "--resume"]
+  assert rl_multiseed.main(argv[:argv.index("--timesteps")] + ["--timesteps", "512"]
+                           + argv[argv.index("--timesteps") + 2:]) == 0
+  row = _load(os.path.join(str(tmp_path), "rl_pusherenv_cpu_c.json"))["rows"][0]
+  assert [c["iterations_at_end"] for c in row["calls"]] == [2, 4] and row["env_steps_per_seed"] == 512
+  assert "--tag b" in row["calls"][0]["command"] and "--resume" in row["calls"][1]["command"]
+  seed0 = [h for h in row["history"] if h["seed"] == 0]
+  assert [h["iteration"] for h in seed0] == [2, 4]  # the first call's row kept, then this call's
+  assert seed0[1]["wall_time"] > seed0[0]["wall_time"] > 0
+  md = open(os.path.join(str(tmp_path), "rl_pusherenv_cpu_c.md")).read()
+  assert "  - call 1: `" in md and "  - call 2: `" in md
+
+
 def test_paper_preset_row(two_calls):
   b = _load(os.path.join(two_calls, "rl_pusherenv_cpu_b.json"))
   cfg = b["rows"][0]["config"]

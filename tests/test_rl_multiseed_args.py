@@ -25,6 +25,7 @@ import rl_multiseed  # noqa: E402
     (["--eval-actions", "greedy"], "--eval-actions"),
     (["--eval-actions", "mode,mode"], "--eval-actions"),
     (["--eval-actions", ","], "--eval-actions"),
+    (["--resume"], "--resume"),  # a resumed run lives in --work-dir
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):

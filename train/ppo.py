@@ -186,7 +186,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     episode_length: None → the task's ``episode_length``.
     out_dir: config.json, metrics.jsonl/.csv (rows carry ``seed``), checkpoint.npz (all seeds), curves.png.
     resume: continue from ``out_dir/checkpoint.npz`` (same config; only num_timesteps, eval_every,
-      checkpoint_every, num_eval_envs may change). Equals an uninterrupted run.
+      checkpoint_every, num_eval_envs may change). Equals an uninterrupted run. The rows' ``wall_time``
+      (s of training, compile incl.) goes on from the last kept row's.
     time_limit: stop after the iteration that crosses this many seconds (then evaluate, checkpoint, return).
     profile: time rollout-only vs whole iterations at the end (one extra compile).
     init_from: a checkpoint (run directory or file: a PPO run, or a BC actor from :mod:`train.bc_actor`)
@@ -241,6 +242,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
 
   timings = {k: 0.0 for k in ("compile", "eval_compile", "iterations", "eval", "checkpoint", "host")}
   rows: list = []
+  wall0 = 0.0  # s of training before this call (resume)
   init_fn = jax.vmap(trainer.init_state)
   specs = M.state_specs(jax.eval_shape(init_fn, seed_arr))
   layout = M.shardings(mesh, specs)
@@ -255,6 +257,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     start_iteration = int(ts.iteration[0])
     # Rows logged after the checkpoint were produced by the interrupted tail: redo them.
     rows = [r for r in _read_rows(out_dir) if r["iteration"] <= start_iteration]
+    # Rows' wall_time keeps counting from the kept rows' last one, so that "time to a score" spans calls.
+    wall0 = rows[-1]["wall_time"] if rows else 0.0
   else:
     if resume:
       print(f"resume: no checkpoint in {out_dir}; starting a fresh run", file=sys.stderr)
@@ -324,7 +328,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
         evs = evaluate_all(ts, iteration)
         timings["eval_compile" if first_eval else "eval"] += time.perf_counter() - t0
         first_eval = False
-        wall = round(time.perf_counter() - t_start, 3)
+        wall = round(wall0 + time.perf_counter() - t_start, 3)
         for i, s in enumerate(cfg.seeds):
           n = float(window["episodes"][i])
           row = {"seed": s, "iteration": iteration, "env_steps": iteration * spi, "wall_time": wall,
