@@ -143,16 +143,26 @@ def run_mode(mode: str, argv: list[str], timeout: float) -> list[dict]:
 def write(rows: list[dict], command: str) -> None:
   import jax
 
-  from mjx_damage import io
+  from mjx_damage import io, runtime
 
   stem = os.path.join(RESULTS, f"panda_speed_{jax.default_backend()}")
-  meta = {"command": command, "jax": jax.__version__, "cpu_count": os.cpu_count(),
+  meta = {"command": command, "jax": jax.__version__, "cpu_count": os.cpu_count(), "device": runtime.device_info()[1],
           "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
   io.write_json(stem + ".json", {"meta": meta, "rows": rows}, indent=1)
-  lines = ["# Panda vs gripper step cost on CPU, with and without the XLA:CPU fusion-emitter fix", "",
-           f"Command: `{command}`  ", f"jax {meta['jax']}, {meta['cpu_count']} CPU cores (shared), {meta['date']}. "
+  render(stem, meta, rows)
+
+
+def render(stem: str, meta: dict, rows: list[dict]) -> None:
+  """``stem``.md from the results (also to re-render a JSON file: ``render(stem, **json.load(...))``)."""
+  from mjx_damage import io
+
+  command = meta["command"]
+  device = meta.get("device", f"{meta['cpu_count']} CPU cores (shared)")
+  lines = [f"# Panda vs gripper step cost ({device}), with and without the XLA:CPU fusion-emitter fix", "",
+           f"Command: `{command}`  ", f"jax {meta['jax']}, {device}, host {meta['cpu_count']} CPU cores, {meta['date']}. "
            "`fix`: the flags `import mjx_damage` sets; `emitters`: XLA's new CPU fusion emitters left on "
-           "(before the fix). load = 1-min load average when the row finished.", "",
+           "(before the fix). load = 1-min load average when the row finished."
+           + (f" Note: {meta['note']}" if meta.get("note") else ""), "",
            "## mjx.kinematics of a chain of N hinges (4 envs)", "", "| mode | N | ms per call | load |", "|---|---|---|---|"]
   lines += [f"| {r['mode']} | {r['depth']} | {r['ms_per_call_4_envs']:.2f} | {r['load']} |"
             for r in rows if r["kind"] == "chain"]
