@@ -308,3 +308,37 @@ def test_paper_preset_initial_log_std_per_dimension():
   logits = net.policy_network.apply(running_statistics.init_state(jnp.zeros((6,))), params, obs)
   log_std = np.log(np.asarray(net.parametric_action_distribution.create_dist(logits).scale))
   np.testing.assert_allclose(log_std, np.broadcast_to([-0.5, -0.5, -0.5, -1.5], log_std.shape), atol=1e-5)
+
+
+def test_target_kl_measures_the_updates_own_kl(env):
+  """``target_kl`` stops on the KL the SGD steps made, not on the normaliser's shift since the rollout.
+
+  The observation normaliser is updated before the epochs, so the rollout's recorded logits differ from
+  the policy's own before any step; measured against those, a small target stopped every iteration
+  before its first step (issue 24's paper-preset runs: 0–1 of 80 steps). Now the first step is always
+  taken, a tiny target stops right after it, and a huge one never stops.
+  """
+  kw = dict(seed=0, num_timesteps=3 * ITER, eval_every=ITER, **TINY)
+  steps = TINY["num_minibatches"] * TINY["num_updates_per_batch"]
+  tiny = train.train(env, target_kl=1e-7, **kw).history
+  assert [r["sgd_steps"] for r in tiny] == [1.0, 1.0, 1.0]
+  assert all(r["loss/kl_update"] == 0.0 for r in tiny)  # measured before the one step taken: none yet
+  huge = train.train(env, target_kl=1e6, **kw).history
+  assert [r["sgd_steps"] for r in huge] == [float(steps)] * 3
+  assert all(r["loss/kl_update"] > 0.0 for r in huge)
+
+
+def test_normalizer_after_update_starts_the_ratio_at_one(env):
+  """With ``normalizer_after_update`` the epochs normalise with the statistics the rollout used, so before
+  the first step the policy equals the rollout's (brax's KL is then its 1e-5-per-dimension floor); in
+  brax's order the normaliser's update alone moves it. A tiny target KL keeps exactly that first step,
+  whose pre-update KL is what the metrics report."""
+  kw = dict(seed=0, num_timesteps=3 * ITER, eval_every=ITER, target_kl=1e-7, **TINY)
+  floor = env.action_size * np.log1p(1e-5)
+  sb3 = train.train(env, normalizer_after_update=True, **kw)
+  assert sb3.config.normalizer_after_update
+  np.testing.assert_allclose([r["loss/kl_mean"] for r in sb3.history], floor, rtol=1e-2)
+  brax = train.train(env, **kw).history
+  assert all(r["loss/kl_mean"] > 10 * floor for r in brax[1:])
+  assert not np.allclose([r["loss/kl_mean"] for r in brax], floor, rtol=1e-2)
+  assert train.PPOConfig.preset("paper").normalizer_after_update and not train.PPOConfig().normalizer_after_update

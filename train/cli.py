@@ -124,6 +124,8 @@ CONFIG_FLAGS = (
      "(for --init-from)"),
     ("--update-normalizer", "update_normalizer", _bool, "false: keep the observation statistics the run "
      "starts with (for --init-from: those the actor was fitted to)"),
+    ("--normalizer-after-update", "normalizer_after_update", _bool, "true: the epochs use the observation "
+     "statistics the rollout was collected under, updated after them (SB3's order; PPO's ratio starts at 1)"),
 )
 
 

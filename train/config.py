@@ -74,7 +74,7 @@ class PPOConfig:
   value_cost: float = 0.5  # brax's PPO loss weights the value term by 0.5 (the paper's coefficient)
   reward_scaling: float = 1.0
   max_grad_norm: Optional[float] = 1.0
-  target_kl: Optional[float] = None  # stop the epochs of an iteration once KL > 1.5·target (SB3's rule)
+  target_kl: Optional[float] = None  # stop an iteration's epochs once the update's KL > 1.5·target (SB3's rule)
   policy_hidden_sizes: tuple[int, ...] = (32, 32, 32, 32)
   value_hidden_sizes: tuple[int, ...] = (256, 256, 256, 256, 256)
   activation: str = "swish"
@@ -86,6 +86,12 @@ class PPOConfig:
   # anything (benchmarks/bc_finetune.py ablation, move_glass_of_water: 88–89 % vs 4–35 % completion at
   # the first evaluation, 81.4 % vs 100 % at the end; docs/IMITATION.md).
   update_normalizer: bool = True
+  # True: the SGD epochs normalise with the statistics the rollout was collected under and this rollout is
+  # folded into them afterwards (SB3's order: VecNormalize normalises when collecting), so PPO's ratio
+  # starts at exactly 1. False: brax's order, statistics updated first. With 512-step rollouts the update
+  # moved the policy 0.9–24 nats from the rollout's logits before any step
+  # (benchmarks/results/paper_preset_sgd_steps_cpu.md), leaving the clipped ratio little to learn from.
+  normalizer_after_update: bool = False
   damage_weight: float = 0.0
   budget: Optional[float] = None
   multiplier: str = "lagrangian"
@@ -219,7 +225,7 @@ class PPOConfig:
       raise ValueError(f"budget_anneal_steps: must be an integer >= 0 (env steps per seed), got {v!r}")
     if v and self.budget is None:
       raise ValueError("budget_anneal_steps: anneals the Lagrangian's budget; set budget too (got budget=None)")
-    for name in ("cost_critic", "update_normalizer"):
+    for name in ("cost_critic", "update_normalizer", "normalizer_after_update"):
       if not isinstance(getattr(self, name), bool):
         raise ValueError(f"{name}: true or false, got {getattr(self, name)!r}")
     if self.multiplier not in MULTIPLIERS:
@@ -254,7 +260,7 @@ class PPOConfig:
     # Older checkpoints lack the newer fields: they ran with what these were then.
     old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
            "value_cost": 0.5, "budget_anneal_steps": 0,
-           "cost_critic": False, "update_normalizer": True}
+           "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 
@@ -268,7 +274,7 @@ _PAPER = dict(
     learning_rate=1e-3, anneal_learning_rate=True, clipping_epsilon=0.2, entropy_cost=0.0, value_cost=0.5,
     max_grad_norm=0.5, target_kl=0.01, discounting=0.99, gae_lambda=0.95, reward_scaling=1.0,
     policy_hidden_sizes=(512, 512), value_hidden_sizes=(512, 512), activation="tanh",
-    init_log_std=(-0.5, -1.5), normalize_observations=True)
+    init_log_std=(-0.5, -1.5), normalize_observations=True, normalizer_after_update=True)
 _LEGACY = dict(
     num_envs=1024, unroll_length=20, num_minibatches=8, batch_size=None, num_updates_per_batch=4,
     learning_rate=3e-4, entropy_cost=1e-3, discounting=0.97, gae_lambda=0.95, clipping_epsilon=0.2,

@@ -210,37 +210,65 @@ class Trainer:
     return ts.replace(env_state=env_state, episode=acc, rng=key), data, self._psum(jax.tree.map(jnp.sum, ended))
 
   # -- learning -------------------------------------------------------------
-  def _minibatch(self, normalizer, weights, carry, inp):
+  def _minibatch(self, normalizer, weights, start_policy, carry, inp):
     """One SGD step; with ``target_kl`` a step whose pre-update KL exceeds 1.5·target stops the rest.
+
+    That KL is the update's own: ``start_policy`` (the parameters when the epochs began) against the
+    policy now, both under ``normalizer``. brax's ``kl_mean`` metric compares with the logits the
+    rollout recorded, under the normaliser before this iteration's update; that shift alone can exceed
+    the target and would stop the epochs before the first step (it did: issue 24's paper-preset runs
+    took 0–1 of their 80 steps per iteration). SB3's rule, whose observations are normalised when
+    collected, measures the same thing as this one.
     ``weights``: (w, λ) f32[] each, what the cost critic's loss mixes the advantages with."""
     params, opt_state, stopped = carry
     mb, key = inp
     (_, metrics), new_params, new_opt = self.gradient_update(params, normalizer, mb, key, *weights,
                                                              optimizer_state=opt_state)
-    metrics = self._pmean({k: metrics[k] for k in LOSS_KEYS})  # one KL on every shard: they stop together
+    if self.cfg.target_kl is not None:
+      metrics = dict(metrics, kl_update=self._update_kl(normalizer, start_policy, params.policy, mb.observation))
+    metrics = self._pmean({k: metrics[k] for k in self._loss_keys})  # one KL on every shard: they stop together
     if self.cfg.target_kl is None:
       return (new_params, new_opt, stopped), (metrics, jnp.ones(()))
-    stop = stopped | (metrics["kl_mean"] > 1.5 * self.cfg.target_kl)
+    stop = stopped | (metrics["kl_update"] > 1.5 * self.cfg.target_kl)
     keep = lambda old, new: jax.tree.map(lambda a, b: jnp.where(stop, a, b), old, new)  # noqa: E731
     return (keep(params, new_params), keep(opt_state, new_opt), stop), (metrics, 1.0 - stop.astype(jnp.float32))
 
-  def _epoch(self, normalizer, weights, data, carry, key):
+  def _update_kl(self, normalizer, start_policy, policy, obs):
+    """Mean KL(π_start ‖ π_policy) of the pre-tanh Gaussians over ``obs`` f32[B, T, O], both under
+    ``normalizer``: how far the SGD steps so far have moved the policy. Exact (brax's ``kl_divergence``
+    adds 1e-5 inside its log, a floor of 1e-5 per action dimension)."""
+    dist = self.network.parametric_action_distribution
+    start = dist.create_dist(jax.lax.stop_gradient(self.network.policy_network.apply(normalizer, start_policy, obs)))
+    now = dist.create_dist(self.network.policy_network.apply(normalizer, policy, obs))
+    ratio = jnp.square(start.scale / now.scale)
+    kl = 0.5 * (ratio + jnp.square((start.loc - now.loc) / now.scale) - 1.0 - jnp.log(ratio))
+    return jnp.mean(jnp.sum(kl, axis=-1))
+
+  @property
+  def _loss_keys(self):
+    return LOSS_KEYS + (("kl_update",) if self.cfg.target_kl is not None else ())
+
+  def _epoch(self, normalizer, weights, start_policy, data, carry, key):
     k_perm, k_loss = jax.random.split(key)
     n_mb = self.cfg.num_minibatches
     shuffled = jax.tree.map(lambda x: jax.random.permutation(k_perm, x).reshape((n_mb, -1) + x.shape[1:]), data)
-    return jax.lax.scan(functools.partial(self._minibatch, normalizer, weights), carry,
+    return jax.lax.scan(functools.partial(self._minibatch, normalizer, weights, start_policy), carry,
                         (shuffled, jax.random.split(k_loss, n_mb)))
 
   def update(self, ts: TrainState, data: types.Transition):
-    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order); the
-    cost critic's loss mixes with the state's w and λ (the λ the data was collected under)."""
+    """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order; with
+    ``normalizer_after_update`` the epochs see the rollout's statistics); the cost critic's loss mixes
+    with the state's w and λ (the λ the data was collected under)."""
     weights = (ts.damage_weight, ts.multiplier.lam)
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
     if self.cfg.normalize_observations and self.cfg.update_normalizer:
       normalizer = running_statistics.update(normalizer, data.observation, pmap_axis_name=self.axis_name)
+    # brax's order normalises the epochs' inputs with the statistics just updated; SB3's (config
+    # normalizer_after_update) with those the rollout's logits were computed under.
+    sgd_normalizer = ts.normalizer if self.cfg.normalizer_after_update else normalizer
     (params, opt_state, _), (metrics, taken) = jax.lax.scan(
-        functools.partial(self._epoch, normalizer, weights, data),
+        functools.partial(self._epoch, sgd_normalizer, weights, ts.params.policy, data),
         (ts.params, ts.opt_state, jnp.zeros((), bool)),
         jax.random.split(self._local(k_sgd), self.cfg.num_updates_per_batch))
     metrics = {k: jnp.sum(v * taken) / jnp.maximum(jnp.sum(taken), 1.0) for k, v in metrics.items()}
