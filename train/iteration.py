@@ -4,7 +4,8 @@
 E envs (``lax.scan``), reward shaping with the multiplier the rollout was
 collected under, multiplier update, observation-normaliser update, then
 ``num_updates_per_batch`` epochs of ``num_minibatches`` minibatches (nested
-``lax.scan``); GAE and the clipped loss are brax's ``compute_ppo_loss``.
+``lax.scan``; with ``normalizer_after_update`` the epochs use the statistics the
+rollout was collected under); GAE and the clipped loss are brax's ``compute_ppo_loss``.
 Nothing here loops in Python and nothing depends on the seed count: the run
 loop (train.ppo) vmaps this function over a leading seed axis of the whole
 :class:`TrainState` and jits it once, so S seeds are one program and one call
