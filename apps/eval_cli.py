@@ -26,6 +26,7 @@ COMPILE_S = {"cpu": 40, "gpu": 60}
 def build_parser() -> Parser:
   ap = Parser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
   R.add_task_policy_arguments(ap)
+  R.add_task_override_arguments(ap)
   R.add_backend_argument(ap, default="auto")
   ap.add_argument("--native-envs", type=int, default=256,
                   help="native backend: episodes stepped at once (at most --episodes)")
@@ -56,7 +57,8 @@ def main(argv=None) -> int:
     if args.out is not None:
       outputs.check_new([args.out], "--out", args.overwrite)
     out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
-    env = R.make_task(args.task, **R.policy_task_kwargs(args.policy, args.task))  # a checkpoint's obs_mode …
+    overrides = R.task_overrides(args.task, args.policy, args.robot, args.task_arg)  # a checkpoint's obs_mode …
+    env = R.make_task(args.task, **overrides)
     policy = R.make_policy(args.policy, env)
     backend = R.pick_backend(args.backend, env)
     env = R.on_backend(env, backend, min(args.native_envs, args.episodes))
@@ -83,7 +85,8 @@ def main(argv=None) -> int:
   if res["program"] == "loaded":
     print("traced program loaded from the cache (no tracing, no compiling)")
   result = {
-      "task": args.task, "policy": args.policy, "episodes": args.episodes, "seed": args.seed,
+      "task": args.task, "task_kwargs": overrides, "policy": args.policy, "episodes": args.episodes,
+      "seed": args.seed,
       "fragility": args.fragility, "episode_length": res["episode_length"], "backend": backend,
       "backend_requested": args.backend,
       "command": "mjx-damage eval " + " ".join(sys.argv[1:] if argv is None else argv),

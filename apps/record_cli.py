@@ -48,6 +48,7 @@ def build_parser() -> Parser:
   p.add_argument("--task", required=True, help="registered task name")
   p.add_argument("--policy", required=True,
                  help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint[+sample|+mean]:RUN")
+  R.add_task_override_arguments(p)
   p.add_argument("--episodes", type=int, required=True, help="episodes to record")
   p.add_argument("--out", default=None, help="output .hdf5 (default: runs/record-<task>-<time>/demos.hdf5)")
   p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
@@ -70,18 +71,19 @@ def main(argv=None) -> int:
         raise ValueError(f"{name}: must be >= 1, got {getattr(args, name)}")
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
-    # a checkpoint's task overrides (its obs_mode …), so the env matches the policy
-    overrides = {} if args.policy.startswith("operator:") else R.policy_task_kwargs(args.policy, args.task)
+    # a checkpoint's task overrides (its obs_mode …), so the env matches the policy, then the command line's
+    spec = None if args.policy.startswith("operator:") else args.policy
+    overrides = R.task_overrides(args.task, spec, args.robot, args.task_arg)
+    env = R.make_task(args.task, **overrides)  # unknown robots and task arguments are refused here
   except ValueError as e:
     ap.error(str(e))
-  import jax  # after the argument checks: a bad command line answers without starting JAX
+  import jax
   import numpy as np
 
   from mjx_damage import data as D
   from train.record import record_chunks
 
   out = args.out or os.path.join(outputs.run_dir("record", args.task), "demos.hdf5")
-  env = R.make_task(args.task, **overrides)
   policy = make_recorder_policy(args.policy, env)
   platform = jax.default_backend()
   print(f"record: task {args.task}, policy {args.policy}, {args.episodes} episodes, device {platform}; "
@@ -100,7 +102,8 @@ def main(argv=None) -> int:
     D.save_chunks(out, counted(record_chunks(
         env, policy, args.episodes, args.seed, task=args.task,
         episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
-        label=args.policy.replace("operator:", ""), log=lambda m: print(m, flush=True))), overwrite=args.overwrite)
+        label=args.policy.replace("operator:", ""), env_config=overrides, log=lambda m: print(m, flush=True))),
+      overwrite=args.overwrite)
   total_s = time.perf_counter() - t0
   success = np.concatenate([f[0] for f in flags])
   safe = np.concatenate([f[1] for f in flags])

@@ -31,6 +31,7 @@ def build_parser() -> Parser:
       prog="mjx-damage render",
       description="Render a rollout: damaged links tinted red, health bars for every tracked entity.")
   R.add_task_policy_arguments(ap)
+  R.add_task_override_arguments(ap)
   R.add_backend_argument(ap, "the rollout the frames show is stepped by it")
   ap.add_argument("--out", default=None,
                   help="output video, .mp4 or .gif (default: runs/render-<task>-<time>/rollout.mp4)")
@@ -73,7 +74,7 @@ def main(argv=None) -> int:
       if args.plots is None:
         raise ValueError("training_log: needs --plots DIR to write the curves to")
       training_log.find_training_log(args.training_log)
-    env = R.make_task(args.task, **R.policy_task_kwargs(args.policy, args.task))
+    env = R.make_task(args.task, **R.task_overrides(args.task, args.policy, args.robot, args.task_arg))
     policy = R.make_policy(args.policy, env)
     args.backend = R.pick_backend(args.backend, env)  # auto → the backend used, as printed and recorded
     env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env

@@ -176,6 +176,35 @@ def add_task_policy_arguments(ap) -> None:
   ap.add_argument("--policy", required=True, help=" | ".join(POLICY_SPECS))
 
 
+def add_task_override_arguments(ap) -> None:
+  """``--robot`` and ``--task-arg KEY=JSON`` (repeatable): keyword arguments of ``tasks.make`` on a command line."""
+  ap.add_argument("--robot", default=None, help="robot of a registry task, e.g. panda (default: the task's)")
+  ap.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
+                  help="task keyword argument (repeatable), e.g. --task-arg obs_mode=paper --task-arg start=in_hand; "
+                       "a checkpoint policy brings its own, which these may add to but not change")
+
+
+def task_overrides(task: str, policy_spec: Optional[str] = None, robot: Optional[str] = None,
+                   task_args=()) -> dict:
+  """``tasks.make`` keywords for a command: a checkpoint policy's task overrides (its obs_mode …, so the
+  env matches the policy), then ``--task-arg`` items and ``--robot``. A value the checkpoint was trained
+  with cannot be changed (``ValueError`` naming the flag); everything is checked by :func:`make_task`."""
+  out = policy_task_kwargs(policy_spec, task) if policy_spec is not None else {}
+  given = tasks.parse_task_args(task_args)
+  if robot is not None:
+    if "robot" in given and given["robot"] != robot:
+      raise ValueError(f"--robot: {robot!r} disagrees with --task-arg robot={given['robot']!r}")
+    given["robot"] = robot
+  if given and task in BUILTIN_TASKS:
+    flag = "--robot" if list(given) == ["robot"] else "--task-arg"
+    raise ValueError(f"{flag}: built-in scene {task!r} takes no task arguments")
+  for key, value in given.items():
+    if key in out and out[key] != value:
+      flag = "--robot" if key == "robot" and robot is not None else "--task-arg"
+      raise ValueError(f"{flag}: the checkpoint was trained with {key}={out[key]!r}; got {value!r}")
+  return {**out, **given}
+
+
 def policy_task_kwargs(policy_spec: str, task: str) -> dict:
   """Task overrides the policy needs: a checkpoint's (:func:`checkpoint_task_kwargs`), else none."""
   kind, _ = parse_policy_spec(policy_spec)

@@ -42,7 +42,7 @@ def build_parser() -> Parser:
               + K.help_text() + "\n\nMuJoCo's own viewer keys (mouse: rotate/zoom/pan; Ctrl + drag: push a "
               "body; letters toggle display flags) keep working.")
   ap.add_argument("--task", required=True, help=f"task name (registry tasks, or built-in: {', '.join(R.BUILTIN_TASKS)})")
-  ap.add_argument("--robot", default=None, help="robot of a registry task (default: the task's)")
+  R.add_task_override_arguments(ap)
   ap.add_argument("--policy", default=None,
                   help="scripted:safe | scripted:unsafe | random | zero | checkpoint[+sample|+mean]:RUN drives the robot "
                        "(default: you, from the keyboard)")
@@ -87,12 +87,7 @@ def _check(args) -> dict:
     if not args.record.lower().endswith((".hdf5", ".h5")):
       raise ValueError(f"record: must end in .hdf5 or .h5, got {args.record!r}")
     outputs.check_writable(args.record, "--record")
-  overrides = R.policy_task_kwargs(args.policy, args.task) if args.policy is not None else {}
-  if args.robot is not None:
-    if args.task in R.BUILTIN_TASKS:
-      raise ValueError(f"robot: built-in scene {args.task!r} has no robot choice")
-    overrides["robot"] = args.robot
-  return overrides
+  return R.task_overrides(args.task, args.policy, args.robot, args.task_arg)
 
 
 def main(argv=None) -> int:

@@ -118,6 +118,24 @@ def rl_settings(name: str, overrides_json: str | None = None) -> dict:
   return settings
 
 
+def parse_task_args(items) -> dict:
+  """``["KEY=JSON", ...]`` (the command lines' repeatable ``--task-arg``) → task keyword arguments.
+
+  A value that is not JSON is kept as a string (``obs_mode=paper``); the keys and values are checked
+  by :func:`make`. Raises ``ValueError`` naming ``--task-arg`` for an item without ``=`` or a key.
+  """
+  out = {}
+  for item in items or ():
+    key, sep, value = str(item).partition("=")
+    if not sep or not key.strip():
+      raise ValueError(f"--task-arg: expected KEY=JSON, got {item!r}")
+    try:
+      out[key.strip()] = json.loads(value)
+    except json.JSONDecodeError:
+      out[key.strip()] = value
+  return out
+
+
 def _task_options(cls) -> dict:
   """Constructor keywords of a task class (its own and inherited) with their defaults."""
   opts = {}

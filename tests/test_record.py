@@ -69,3 +69,16 @@ def test_cli_streams_chunks_into_the_file_as_record_would_hold_them(tmp_path, ca
   for f in ("actions", "rewards", "states", "cost", "success", "safe", "lengths"):
     np.testing.assert_allclose(getattr(back, f), getattr(whole, f), rtol=1e-5, atol=1e-5, err_msg=f)
   assert back.label_names == ("careful",) and summary["success_rate"] == float(np.mean(whole.success))
+
+
+def test_cli_task_args_build_the_env_and_are_stored(tmp_path):
+  """`--task-arg` builds the env the episodes come from and is stored with them (``env_config``), so a
+  policy trained on the file (mjx-damage bc) gets the same task."""
+  import json
+
+  out = tmp_path / "demos.hdf5"
+  rc = cli.main(["record", "--task", "pick_egg", "--policy", "zero", "--task-arg", "goal=carry", "--episodes", "2",
+                 "--episode-length", "4", "--out", str(out)])
+  assert rc == 0
+  back = D.load(out, task="pick_egg")
+  assert json.loads(back.env_config) == {"goal": "carry"}

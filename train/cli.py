@@ -168,19 +168,6 @@ def build_parser() -> Parser:
   return p
 
 
-def _task_kwargs(items) -> dict:
-  out = {}
-  for item in items:
-    key, sep, value = item.partition("=")
-    if not sep or not key:
-      raise ValueError(f"--task-arg: expected KEY=JSON, got {item!r}")
-    try:
-      out[key] = json.loads(value)
-    except json.JSONDecodeError:
-      out[key] = value  # bare strings: obs_mode=paper
-  return out
-
-
 def split_args(args: dict) -> tuple[dict, dict]:
   """argparse namespace → (train() keywords, PPOConfig overrides given on the command line)."""
   fields = {dest for _, dest, _, _ in CONFIG_FLAGS}
@@ -256,7 +243,8 @@ def main(argv=None) -> int:
   dist = {k: args.pop(k) for k in DIST_FLAGS}
   try:  # everything the user typed is checked here, before JAX starts
     setup = distributed.check(**dist)
-    args["task_kwargs"] = _task_kwargs(args.pop("task_arg")) or None
+    import tasks  # the registry (loads JAX, compiles nothing)
+    args["task_kwargs"] = tasks.parse_task_args(args.pop("task_arg")) or None
     check_task(task)
     if args["init_from"] is not None and not os.path.exists(args["init_from"]):
       raise ValueError(f"--init-from: no checkpoint at {args['init_from']}")

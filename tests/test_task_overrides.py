@@ -1,0 +1,34 @@
+"""``--robot`` / ``--task-arg`` on eval, render, record and view (apps.resolve.task_overrides): the command
+line's task arguments, over a checkpoint's, checked before anything is built."""
+
+import pytest
+
+from apps import resolve as R
+import tasks
+
+
+def test_task_args_parse_json_and_bare_strings():
+  assert tasks.parse_task_args(["obs_mode=paper", "success_bonus=2", "start=\"in_hand\""]) == {
+      "obs_mode": "paper", "success_bonus": 2, "start": "in_hand"}
+  for bad in ("obs_mode", "=paper"):
+    with pytest.raises(ValueError, match="--task-arg"):
+      tasks.parse_task_args([bad])
+
+
+def test_robot_and_task_args_merge_over_a_checkpoints(monkeypatch):
+  monkeypatch.setattr(R, "policy_task_kwargs", lambda spec, task: {"obs_mode": "paper"})
+  assert R.task_overrides("place_plate", "checkpoint:run", "panda", ["start=in_hand"]) == {
+      "obs_mode": "paper", "robot": "panda", "start": "in_hand"}
+  assert R.task_overrides("place_plate", "checkpoint:run", None, ["obs_mode=paper"]) == {"obs_mode": "paper"}
+  with pytest.raises(ValueError, match="--task-arg: the checkpoint was trained with obs_mode='paper'"):
+    R.task_overrides("place_plate", "checkpoint:run", None, ["obs_mode=state"])
+
+
+def test_conflicting_or_misplaced_flags_name_themselves():
+  assert R.task_overrides("place_plate") == {}
+  with pytest.raises(ValueError, match="--robot: 'panda' disagrees"):
+    R.task_overrides("place_plate", None, "panda", ["robot=gripper"])
+  with pytest.raises(ValueError, match="--robot: built-in scene"):
+    R.task_overrides("drop", None, "panda")
+  with pytest.raises(ValueError, match="--task-arg: built-in scene"):
+    R.task_overrides("drop", None, None, ["k=1"])
