@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     if args.out is not None:
       outputs.check_new([args.out], "--out", args.overwrite)
     out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
-    overrides = R.task_overrides(args.task, args.policy, args.robot, args.task_arg)  # a checkpoint's obs_mode …
+    overrides = R.task_overrides(args.task, R.policy_task_kwargs(args.policy, args.task), args.robot, args.task_arg)
     env = R.make_task(args.task, **overrides)
     policy = R.make_policy(args.policy, env)
     backend = R.pick_backend(args.backend, env)

@@ -72,8 +72,8 @@ def main(argv=None) -> int:
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
     # a checkpoint's task overrides (its obs_mode …), so the env matches the policy, then the command line's
-    spec = None if args.policy.startswith("operator:") else args.policy
-    overrides = R.task_overrides(args.task, spec, args.robot, args.task_arg)
+    trained = {} if args.policy.startswith("operator:") else R.policy_task_kwargs(args.policy, args.task)
+    overrides = R.task_overrides(args.task, trained, args.robot, args.task_arg)
     env = R.make_task(args.task, **overrides)  # unknown robots and task arguments are refused here
   except ValueError as e:
     ap.error(str(e))

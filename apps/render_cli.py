@@ -74,7 +74,8 @@ def main(argv=None) -> int:
       if args.plots is None:
         raise ValueError("training_log: needs --plots DIR to write the curves to")
       training_log.find_training_log(args.training_log)
-    env = R.make_task(args.task, **R.task_overrides(args.task, args.policy, args.robot, args.task_arg))
+    trained = R.policy_task_kwargs(args.policy, args.task)  # a checkpoint's obs_mode …
+    env = R.make_task(args.task, **R.task_overrides(args.task, trained, args.robot, args.task_arg))
     policy = R.make_policy(args.policy, env)
     args.backend = R.pick_backend(args.backend, env)  # auto → the backend used, as printed and recorded
     env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env

@@ -184,12 +184,12 @@ def add_task_override_arguments(ap) -> None:
                        "a checkpoint policy brings its own, which these may add to but not change")
 
 
-def task_overrides(task: str, policy_spec: Optional[str] = None, robot: Optional[str] = None,
-                   task_args=()) -> dict:
-  """``tasks.make`` keywords for a command: a checkpoint policy's task overrides (its obs_mode …, so the
-  env matches the policy), then ``--task-arg`` items and ``--robot``. A value the checkpoint was trained
-  with cannot be changed (``ValueError`` naming the flag); everything is checked by :func:`make_task`."""
-  out = policy_task_kwargs(policy_spec, task) if policy_spec is not None else {}
+def task_overrides(task: str, trained: Optional[dict] = None, robot: Optional[str] = None, task_args=()) -> dict:
+  """``tasks.make`` keywords for a command: ``trained``, the task overrides a checkpoint policy was trained
+  with (:func:`policy_task_kwargs`: its obs_mode …, so the env matches the policy), then ``--task-arg``
+  items and ``--robot``. A trained value cannot be changed (``ValueError`` naming the flag); everything is
+  checked by :func:`make_task`."""
+  out = dict(trained or {})
   given = tasks.parse_task_args(task_args)
   if robot is not None:
     if "robot" in given and given["robot"] != robot:

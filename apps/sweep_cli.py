@@ -40,6 +40,7 @@ def build_parser() -> Parser:
   ap.add_argument("--policies", default="scripted:safe,scripted:unsafe", help="comma-separated policy specs")
   ap.add_argument("--seeds", default="0", help="comma-separated seeds")
   ap.add_argument("--fragility", default="1", help="comma-separated fragility factors (> 0)")
+  R.add_task_override_arguments(ap)
   ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
   ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
@@ -92,7 +93,7 @@ def main(argv=None) -> int:
       R.check_task(t)
     for p in policies:
       R.parse_policy_spec(p)
-    overrides = {t: task_overrides(t, policies) for t in tasks}
+    overrides = {t: R.task_overrides(t, task_overrides(t, policies), args.robot, args.task_arg) for t in tasks}
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
     if setup.multi_process and args.out is None:
@@ -123,7 +124,7 @@ def main(argv=None) -> int:
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
         "num_devices": len(devices), "processes": jax.process_count(),  # episodes are sharded over them
-        "tasks": tasks, "policies": policies, "seeds": seeds, "fragility": levels,
+        "tasks": tasks, "task_kwargs": overrides, "policies": policies, "seeds": seeds, "fragility": levels,
         "episodes": args.episodes, "safe_threshold": args.safe_threshold, "backend": args.backend,
         "backend_per_task": dict(backends),
         "executables_compiled": res["compiles"],

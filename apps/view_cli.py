@@ -87,7 +87,8 @@ def _check(args) -> dict:
     if not args.record.lower().endswith((".hdf5", ".h5")):
       raise ValueError(f"record: must end in .hdf5 or .h5, got {args.record!r}")
     outputs.check_writable(args.record, "--record")
-  return R.task_overrides(args.task, args.policy, args.robot, args.task_arg)
+  trained = R.policy_task_kwargs(args.policy, args.task) if args.policy is not None else {}
+  return R.task_overrides(args.task, trained, args.robot, args.task_arg)
 
 
 def main(argv=None) -> int:

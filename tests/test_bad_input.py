@@ -131,6 +131,7 @@ CLI_CASES = [
      "--robot"),
     (["render", "--task", "place_plate", "--policy", "zero", "--task-arg", "start=floor"], "start"),
     (["record", "--task", "pick_egg", "--policy", "zero", "--episodes", "1", "--robot", "ur5"], "robot"),
+    (["sweep", "--tasks", "place_plate,drop", "--policies", "zero", "--robot", "panda"], "--robot"),
     (["render", "--task", "no_such_task", "--policy", "zero"], "task"),
     (["render", "--task", "drop", "--policy", "zero", "--out", "{tmp}/exists.mp4"], "--overwrite"),
     (["render", "--task", "drop", "--policy", "zero", "--out", "{tmp}/v.avi"], "out"),

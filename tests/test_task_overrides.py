@@ -15,13 +15,16 @@ def test_task_args_parse_json_and_bare_strings():
       tasks.parse_task_args([bad])
 
 
-def test_robot_and_task_args_merge_over_a_checkpoints(monkeypatch):
-  monkeypatch.setattr(R, "policy_task_kwargs", lambda spec, task: {"obs_mode": "paper"})
-  assert R.task_overrides("place_plate", "checkpoint:run", "panda", ["start=in_hand"]) == {
+def test_robot_and_task_args_merge_over_a_checkpoints():
+  trained = {"obs_mode": "paper"}  # what a checkpoint was trained with (R.policy_task_kwargs)
+  assert R.task_overrides("place_plate", trained, "panda", ["start=in_hand"]) == {
       "obs_mode": "paper", "robot": "panda", "start": "in_hand"}
-  assert R.task_overrides("place_plate", "checkpoint:run", None, ["obs_mode=paper"]) == {"obs_mode": "paper"}
+  assert R.task_overrides("place_plate", trained, None, ["obs_mode=paper"]) == {"obs_mode": "paper"}
   with pytest.raises(ValueError, match="--task-arg: the checkpoint was trained with obs_mode='paper'"):
-    R.task_overrides("place_plate", "checkpoint:run", None, ["obs_mode=state"])
+    R.task_overrides("place_plate", trained, None, ["obs_mode=state"])
+  with pytest.raises(ValueError, match="--robot: the checkpoint was trained with robot='gripper'"):
+    R.task_overrides("place_plate", {"robot": "gripper"}, "panda")
+  assert trained == {"obs_mode": "paper"}  # not modified
 
 
 def test_conflicting_or_misplaced_flags_name_themselves():
