@@ -54,7 +54,7 @@ def build_parser() -> Parser:
   return ap
 
 
-def task_overrides(task: str, policies) -> dict:
+def trained_overrides(task: str, policies) -> dict:
   """The task overrides the sweep's checkpoints of ``task`` were trained with (their obs_mode …): one env
   serves every policy of a task, so the checkpoints must agree; a checkpoint of another task is refused."""
   found = {}
@@ -93,7 +93,7 @@ def main(argv=None) -> int:
       R.check_task(t)
     for p in policies:
       R.parse_policy_spec(p)
-    overrides = {t: R.task_overrides(t, task_overrides(t, policies), args.robot, args.task_arg) for t in tasks}
+    overrides = {t: R.task_overrides(t, trained_overrides(t, policies), args.robot, args.task_arg) for t in tasks}
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
     if setup.multi_process and args.out is None:

@@ -285,10 +285,10 @@ def test_sweep_uses_its_checkpoints_task_overrides_and_refuses_disagreeing_ones(
   (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
   a = _fake_checkpoint(tmp_path / "a", "place_plate", {"obs_mode": "paper"})
   b = _fake_checkpoint(tmp_path / "b", "place_plate", {})
-  assert sweep_cli.task_overrides("place_plate", ["scripted:safe", f"checkpoint:{a}"]) == {"obs_mode": "paper"}
-  assert sweep_cli.task_overrides("place_plate", ["scripted:safe", "random"]) == {}
+  assert sweep_cli.trained_overrides("place_plate", ["scripted:safe", f"checkpoint:{a}"]) == {"obs_mode": "paper"}
+  assert sweep_cli.trained_overrides("place_plate", ["scripted:safe", "random"]) == {}
   with pytest.raises(ValueError, match="^policies: the checkpoints were trained with different overrides"):
-    sweep_cli.task_overrides("place_plate", [f"checkpoint:{a}", f"checkpoint+sample:{b}"])
+    sweep_cli.trained_overrides("place_plate", [f"checkpoint:{a}", f"checkpoint+sample:{b}"])
   with pytest.raises(SystemExit) as e:
     sweep_cli.main(["--tasks", "pick_egg", "--policies", f"checkpoint:{a}", "--episodes", "2",
                     "--out", str(tmp_path / "s.json")])

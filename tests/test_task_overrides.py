@@ -1,4 +1,4 @@
-"""``--robot`` / ``--task-arg`` on eval, render, record and view (apps.resolve.task_overrides): the command
+"""``--robot`` / ``--task-arg`` on eval, sweep, render, record and view (apps.resolve.task_overrides): the command
 line's task arguments, over a checkpoint's, checked before anything is built."""
 
 import pytest
