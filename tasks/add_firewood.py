@@ -116,7 +116,7 @@ class AddFirewood(Task):
     if style not in ("safe", "unsafe"):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
-    closed = R.gripper_command_for_gap(2 * LOG_HALF[1] - 0.04)  # 2 cm inside each side: a firm grip
+    closed = R.gripper_command_for_gap(2 * LOG_HALF[1] - 0.04, self.robot)  # 2 cm inside each side: a firm grip
     opened = 1.0
     fire = jnp.array(FIRE_XY)
 

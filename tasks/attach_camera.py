@@ -151,7 +151,7 @@ class AttachCamera(Task):
     safe = style == "safe"
     robot = self.robot
     pre = SAFE_PRE if safe else UNSAFE_PRE
-    opened = R.gripper_command_for_gap(2 * BODY_HALF[1] + 0.03)
+    opened = R.gripper_command_for_gap(2 * BODY_HALF[1] + 0.03, self.robot)
     dz = self.grip_dz
 
     def act(state, rng):

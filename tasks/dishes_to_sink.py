@@ -222,7 +222,7 @@ class DishesToSink(Task):
     half = jnp.array([self.plate_half, self.cup_half])
     half_h = jnp.array([PLATE_HALF_H, CUP_HALF_H])
     grip_dz = jnp.array([self.plate_grip, self.cup_grip]) - half_h  # grip point relative to the dish centre
-    closed = jnp.array([R.squeeze_command(self.plate_half), R.squeeze_command(self.cup_half)])
+    closed = jnp.array([R.squeeze_command(self.plate_half, self.robot), R.squeeze_command(self.cup_half, self.robot)])
     opened = 1.0
     goals = self.goals()
     clear_z = HOVER_Z if safe else CARRY_Z + 0.04  # m, the hand rises to this over the basin after a release

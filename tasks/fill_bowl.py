@@ -236,9 +236,9 @@ class FillBowl(Task):
     safe = style == "safe"
     robot = self.robot
     half_y = self.bowl_outer[1]
-    squeeze = R.gripper_command_for_gap(2 * half_y - 0.03)  # 1.5 cm inside each wall (≈ 6 N per pad)
+    squeeze = R.gripper_command_for_gap(2 * half_y - 0.03, self.robot)  # 1.5 cm inside each wall (≈ 6 N per pad)
     wide_gap = min(WIDE_GAP, 2 * (robot.finger_range[1] - R.FINGER_HALF_THICK))  # the widest this hand opens
-    wide = R.gripper_command_for_gap(WIDE_GAP)
+    wide = R.gripper_command_for_gap(WIDE_GAP, self.robot)
     spot = jnp.array(OUTLET[:2])
 
     def act(state, rng):

@@ -151,7 +151,7 @@ class IgniteWood(Task):
     robot = self.robot
     gx = GRIP_SAFE if safe else GRIP_UNSAFE
     closed = -1.0  # fully closed: the pads' 16 N hold the lighter level against its lever
-    opened = R.gripper_command_for_gap(0.08)
+    opened = R.gripper_command_for_gap(0.08, self.robot)
     kindling = jnp.array(KINDLING)
     leave = 1.0 if safe else LINGER
     hold_dz, carry_z = self.hold_dz, self.carry_z

@@ -113,8 +113,8 @@ class NavigateAndPick(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    squeeze = R.gripper_command_for_gap(SQUEEZE_GAP)
-    wide = R.gripper_command_for_gap(WIDE_GAP)
+    squeeze = R.gripper_command_for_gap(SQUEEZE_GAP, self.robot)
+    wide = R.gripper_command_for_gap(WIDE_GAP, self.robot)
     closed = -1.0
 
     def act(state, rng):

@@ -164,8 +164,8 @@ class PickEgg(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     if isinstance(safe_accel, bool) or not isinstance(safe_accel, (int, float)) or not 0.0 <= safe_accel < 1e3:
       raise ValueError(f"safe_accel: must be a number in [0, 1000) m/s², got {safe_accel!r}")
-    preshape = R.gripper_command_for_gap(2 * EGG_R + 0.02)
-    close = R.gripper_command_for_gap(2 * (EGG_R - SAFE_INSIDE)) if style == "safe" else -1.0
+    preshape = R.gripper_command_for_gap(2 * EGG_R + 0.02, self.robot)
+    close = R.gripper_command_for_gap(2 * (EGG_R - SAFE_INSIDE), self.robot) if style == "safe" else -1.0
     robot, carry, safe = self.robot, self.goal == "carry", style == "safe"
     full_speed = R.MAX_STEP / robot.control_dt  # m/s of a full action
     accel = float(safe_accel)

@@ -135,8 +135,8 @@ class PickUpScrub(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    preshape = R.gripper_command_for_gap(PRESHAPE_GAP)
-    close = R.squeeze_command(HANDLE_HALF)  # 3 cm inside each side: ≈ 12 N per pad
+    preshape = R.gripper_command_for_gap(PRESHAPE_GAP, self.robot)
+    close = R.squeeze_command(HANDLE_HALF, self.robot)  # 3 cm inside each side: ≈ 12 N per pad
     gz = self.grasp_z
 
     def act(state, rng):

@@ -87,7 +87,6 @@ LINE_UP_X = DOOR_X - DISH_HALF[0] - 0.02  # m, dish centre x lined up with its f
 INSERT_SPEED = 0.25  # m/s, the safe insertion (accelerating and braking at INSERT_ACCEL)
 INSERT_ACCEL = 1.0  # m/s²
 HOVER_Z = 0.10  # m, grip-point height when moving the open hand over the counter
-GRIP_CLOSED = R.squeeze_command(DISH_HALF[1])  # 3 cm inside each side
 
 
 class PlaceInMicrowave(Task):
@@ -159,7 +158,7 @@ class PlaceInMicrowave(Task):
     robot = self.robot
     dt = robot.control_dt
     hand_speed = self.hand_speed
-    closed, opened = GRIP_CLOSED, 1.0
+    closed, opened = R.squeeze_command(DISH_HALF[1], robot), 1.0  # 3 cm inside each side
 
     def act(state, rng):
       d = state.pipeline_state

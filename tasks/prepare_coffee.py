@@ -117,9 +117,9 @@ class PrepareCoffee(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    closed = R.squeeze_command(MUG_HALF[1])  # 3 cm inside each side: ≈ 12 N per pad
-    wide = R.gripper_command_for_gap(0.11)
-    release = R.gripper_command_for_gap(RELEASE_GAP)
+    closed = R.squeeze_command(MUG_HALF[1], self.robot)  # 3 cm inside each side: ≈ 12 N per pad
+    wide = R.gripper_command_for_gap(0.11, self.robot)
+    release = R.gripper_command_for_gap(RELEASE_GAP, self.robot)
     spot = jnp.array(SPOT)
 
     def act(state, rng):

@@ -9,9 +9,9 @@ action helpers :func:`move_toward` and :func:`action`, the gripper command
 :func:`gripper_command_for_gap`, and constants (the floating gripper's finger
 range ``Q_MIN``/``Q_MAX`` and agent entity, contact class bits).
 
-Gripper commands are robot-independent (target inner gap, ``interface.py``):
-``gripper_command_for_gap(g)`` means the same gap on every robot, clipped by each
-to its stroke.
+Gripper commands are normalised to each robot's command range (``interface.py``), so
+task code asks for a gap: ``gripper_command_for_gap(g, self.robot)`` is the command
+that means the same ``g`` metres on every robot (clipped to its range).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from tasks.robots import gripper as _gripper
-from tasks.robots.interface import FINGER_HALF_THICK, GAP_MAX, GAP_MIN, MAX_STEP
+from tasks.robots.interface import FINGER_HALF_THICK, GAP_MAX, GAP_MIN, MAX_STEP, command_for_gap
 
 Q_MIN, Q_MAX, FINGER_LENGTH = _gripper.Q_MIN, _gripper.Q_MAX, _gripper.FINGER_LENGTH
 ACTION_SIZE = _gripper.Gripper.action_size
@@ -40,17 +40,18 @@ def gap(q_half):
   return 2.0 * (q_half - FINGER_HALF_THICK)
 
 
-def gripper_command_for_gap(g):
-  """Gripper action in [−1, 1] whose target inner gap is ``g`` m (clipped to the command range)."""
-  q = g / 2.0 + FINGER_HALF_THICK
-  return jnp.clip(2.0 * (q - Q_MIN) / (Q_MAX - Q_MIN) - 1.0, -1.0, 1.0)
+def gripper_command_for_gap(g, robot):
+  """Gripper action in [−1, 1] whose target inner gap is ``g`` m on ``robot`` (a
+  :class:`tasks.robots.interface.Robot` class or instance; clipped to its command range)."""
+  return command_for_gap(g, robot.gap_range)
 
 
-def squeeze_command(half_width, inside=0.03):
-  """Gripper command closing on an object of half width ``half_width`` (m): target ``inside`` m inside
-  each side. The default 3 cm squeezes ≈ 12 N per finger, below the servos' 16 N cap, so the finger
-  springs keep the object centred (with both fingers saturated it would drift across the grip)."""
-  return float(gripper_command_for_gap(2 * half_width - 2 * inside))
+def squeeze_command(half_width, robot, inside=0.03):
+  """Gripper command closing ``robot``'s fingers on an object of half width ``half_width`` (m): target
+  ``inside`` m inside each side. The default 3 cm squeezes ≈ 12 N per finger, below the servos' 16 N cap,
+  so the finger springs keep the object centred (with both fingers saturated it would drift across the
+  grip)."""
+  return float(gripper_command_for_gap(2 * half_width - 2 * inside, robot))
 
 
 # -- helpers for scripted policies ------------------------------------------------

@@ -138,9 +138,9 @@ class ServePastry(Task):
       raise ValueError(f"style: must be 'safe', 'unsafe' or 'drop', got {style!r}")
     safe = style == "safe"
     robot = self.robot
-    preshape = R.gripper_command_for_gap(2 * PASTRY_HALF[1] + 0.02)
-    close = -1.0 if style == "unsafe" else R.gripper_command_for_gap(2 * PASTRY_HALF[1] - 0.010)
-    opened = R.gripper_command_for_gap(2 * PASTRY_HALF[1] + 0.03)
+    preshape = R.gripper_command_for_gap(2 * PASTRY_HALF[1] + 0.02, self.robot)
+    close = -1.0 if style == "unsafe" else R.gripper_command_for_gap(2 * PASTRY_HALF[1] - 0.010, self.robot)
+    opened = R.gripper_command_for_gap(2 * PASTRY_HALF[1] + 0.03, self.robot)
     carry_z = CARRY_Z if safe else DROP_Z
 
     def act(state, rng):

@@ -144,7 +144,7 @@ class ShelveItem(Task):
 
   def edit_scene(self, spec, robot_cls) -> None:
     self.box_half_y = BOX_HALF_Y.get(robot_cls.name, NARROW_BOX_HALF_Y)
-    self.grip_closed = R.squeeze_command(self.box_half_y)  # 3 cm inside each side
+    self.grip_closed = R.squeeze_command(self.box_half_y, robot_cls)  # 3 cm inside each side
     # grip point above the box centre, raised where the fingers are too short for the palm to clear its top
     self.grip_dz = R.grip_height_clearing_palm(GRIP_DZ, BOX_HALF[2], robot_cls.finger_length, PALM_CLEARANCE)
     if self.box_half_y != BOX_HALF[1]:

@@ -9,6 +9,8 @@ import pytest
 
 import tasks
 from tasks import robot as R
+from tasks.robots.gripper import Gripper
+from tasks.robots.panda import Panda
 
 
 # -- registry and API (no compilation) ----------------------------------------------------
@@ -52,9 +54,25 @@ def test_entities_match_health_arrays(name):
 
 def test_gripper_command_roundtrip():
   for g in (0.0, 0.044, 0.1, 0.16):
-    c = float(R.gripper_command_for_gap(g))
+    c = float(R.gripper_command_for_gap(g, Gripper))
     q = R.Q_MIN + 0.5 * (c + 1) * (R.Q_MAX - R.Q_MIN)
     assert abs(float(R.gap(q)) - np.clip(g, float(R.gap(R.Q_MIN)), float(R.gap(R.Q_MAX)))) < 1e-6
+
+
+def test_gripper_command_is_normalised_to_each_robots_range():
+  """One gap means one gap on every robot; −1/+1 are each robot's closed/fully-open ends, and the zero
+  action is the middle of its own range (the Panda's 4.1 cm squeezes its 6 cm plate; 8.1 cm would not)."""
+  from tasks.robots.interface import command_gap
+  for robot in (Gripper, Panda):
+    lo, hi = robot.gap_range
+    for g in (0.01, 0.03, 0.06):
+      assert abs(float(command_gap(R.gripper_command_for_gap(g, robot), robot.gap_range)) - g) < 1e-6
+    assert float(R.gripper_command_for_gap(hi + 0.05, robot)) == 1.0
+    assert float(R.gripper_command_for_gap(0.0, robot)) == -1.0
+  assert abs(float(command_gap(0.0, Panda.gap_range)) - 0.041) < 1e-6
+  assert abs(float(command_gap(0.0, Gripper.gap_range)) - 0.081) < 1e-6
+  # the same 4 cm asks the Panda for a larger command than the gripper
+  assert float(R.gripper_command_for_gap(0.04, Panda)) > float(R.gripper_command_for_gap(0.04, Gripper))
 
 
 def test_select_checks_task_lists_for_a_robot():

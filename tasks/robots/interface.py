@@ -13,10 +13,16 @@ written against the floating gripper keeps meaning the same thing:
 
 Action (``f32[action_size]`` in [−1, 1], NaN counts as 0): ``a[0:3]`` moves the
 grip-point target by ``a·MAX_STEP`` from the *measured* grip point (clipped to the
-workspace box); the last entry is the gripper command: target inner gap
-``GAP_MIN + (a+1)/2·(GAP_MAX − GAP_MIN)``, clipped by each robot to its stroke
-(the gripper's 2 mm–16 cm; the Panda hand's 0–8 cm). A robot with a wrist adds
-``a[3:6]`` (rotation vector of the hand-orientation change, ×MAX_ROT rad).
+workspace box); the last entry is the gripper command, normalised to the robot's own
+command range ``gap_range = (lo, hi)``: target inner gap ``lo + (a+1)/2·(hi − lo)``
+(the gripper's 2 mm–16 cm; the Panda hand's 2 mm–8 cm). So −1 is closed and +1 fully
+open on every robot, and the zero action is the middle of the robot's stroke (8.1 cm
+on the gripper, 4.1 cm on the Panda): a policy that does nothing keeps a grasped object
+of either robot's task variant squeezed, instead of opening the Panda's narrower hand
+around it. Task code asks for a gap in metres (:func:`tasks.robot.gripper_command_for_gap`
+with the robot), never for a raw command, so a scripted grasp means the same gap on
+every robot. A robot with a wrist adds ``a[3:6]`` (rotation vector of the
+hand-orientation change, ×MAX_ROT rad).
 """
 
 from __future__ import annotations
@@ -31,13 +37,22 @@ import numpy as np
 
 MAX_STEP = 0.02  # m per control step: largest grip-point displacement one action asks for
 FINGER_HALF_THICK = 0.006  # m, half thickness of a finger pad (both robots)
-GAP_MIN, GAP_MAX = 0.002, 0.16  # m, target inner gap at gripper command −1 / +1
+GAP_MIN, GAP_MAX = 0.002, 0.16  # m, the floating gripper's target inner gap at command −1 / +1
 FINGER_ACTUATORS = (3, 4)  # ctrl indices of the left/right finger servos on every robot
 
 
-def command_gap(a):
-  """Target inner gap (m) for gripper command ``a`` in [−1, 1]."""
-  return GAP_MIN + 0.5 * (a + 1.0) * (GAP_MAX - GAP_MIN)
+def command_gap(a, gap_range=(GAP_MIN, GAP_MAX)):
+  """Target inner gap (m) for gripper command ``a`` in [−1, 1] on a robot whose command range is
+  ``gap_range`` = (gap at −1, gap at +1) m."""
+  lo, hi = gap_range
+  return lo + 0.5 * (a + 1.0) * (hi - lo)
+
+
+def command_for_gap(g, gap_range=(GAP_MIN, GAP_MAX)):
+  """Gripper command in [−1, 1] whose target inner gap is ``g`` m (clipped to the range); the inverse
+  of :func:`command_gap`."""
+  lo, hi = gap_range
+  return jnp.clip(2.0 * (g - lo) / (hi - lo) - 1.0, -1.0, 1.0)
 
 
 def half_opening(gap):
@@ -68,6 +83,7 @@ class Robot(abc.ABC):
   default_mount: ClassVar[tuple | None] = None  # fixed-base arms: base (x, y, z, yaw) unless the task says
   finger_length: ClassVar[float] = 0.0  # m, grip point (fingertips) to the palm's underside
   episode_scale: ClassVar[float] = 1.0  # tasks' default episode lengths × this (slower robots get longer)
+  gap_range: ClassVar[tuple[float, float]] = (GAP_MIN, GAP_MAX)  # m, target gap at gripper command −1 / +1
 
   def __init__(self, m: mujoco.MjModel, control_dt: float):
     self.scene_nu = int(m.nu)
@@ -130,7 +146,7 @@ class Robot(abc.ABC):
 
   def finger_ctrl(self, a) -> jax.Array:
     """Both finger targets f32[2] (half-openings, m) for gripper command ``a``, within the stroke."""
-    q = jnp.clip(half_opening(command_gap(a)), self.finger_range[0], self.finger_range[1])
+    q = jnp.clip(half_opening(command_gap(a, self.gap_range)), self.finger_range[0], self.finger_range[1])
     return jnp.stack([q, q])
 
   def _pad(self, c, extra_ctrl):
