@@ -41,14 +41,6 @@ region"): the plate is gripped 25–35 cm above the counter, its centre within
 5 cm (per axis) of the goal. Default: ``in_hand`` with ``obs_mode="paper"``,
 ``counter`` otherwise.
 
-Friction cone (``friction_cone``): ``"pyramidal"`` (MuJoCo's default) or
-``"elliptic"`` with impratio 3, which makes friction stiffer than the normal
-force and stops a held object creeping through the fingers. Default: pyramidal
-with the gripper (every committed gripper result), elliptic with the Panda, whose
-5 cm pads let the plate slide out within about 150 of its 200 control steps under
-the pyramidal cone at any grip force (about 0.1 mm per control step), so an
-in-hand episode that only held the plate still ended with it broken.
-
 Hand speed (``hand_speed``, m/s; default 0.4 with the plate in hand, 0 = the
 robot's own ≈ 0.83 m/s for the counter start): actions ask for at most
 ``hand_speed · dt`` of grip-point travel per control step. Why the in-hand
@@ -85,9 +77,6 @@ CARRY_Z = 0.10  # m, grip-point height while carrying (safe policy)
 DROP_Z = 0.18  # m, lowest grip-point height of the unsafe policy's carry and release (≥ 17 cm fall)
 IN_HAND_Z = (0.25, 0.35)  # m, plate centre height range of the in-hand start
 IN_HAND_XY = 0.05  # m, largest xy offset of the in-hand start from the goal (per axis)
-FRICTION_CONES = ("pyramidal", "elliptic")
-DEFAULT_FRICTION_CONE = {"gripper": "pyramidal"}  # other robots: elliptic (module docstring)
-ELLIPTIC_IMPRATIO = 3.0  # friction-to-normal impedance ratio with the elliptic cone: stiffer friction (less slip); 10 made native MuJoCo diverge at 8 solver iterations
 IN_HAND_SPEED = 0.4  # m/s, default hand speed limit with the plate in hand (the robot alone: ≈ 0.83 m/s)
 GRASP_Z = 0.004  # m, grip-point (fingertip) height when grasping: 4 mm above the counter
 
@@ -105,10 +94,7 @@ class PlacePlate(Task):
   starts = ("counter", "in_hand")
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
-               success_bonus=1.0, start=None, hand_speed=None, friction_cone=None):
-    if friction_cone is not None and friction_cone not in FRICTION_CONES:
-      raise ValueError(f"friction_cone: unknown {friction_cone!r}; valid: {', '.join(FRICTION_CONES)}")
-    self.friction_cone = friction_cone
+               success_bonus=1.0, start=None, hand_speed=None):
     if start is None:
       start = "in_hand" if obs_mode == "paper" else "counter"
     if start not in self.starts:
@@ -134,11 +120,6 @@ class PlacePlate(Task):
   def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
     self.plate_half_y = PLATE_HALF_Y.get(robot_cls.name, NARROW_PLATE_HALF_Y)
     self.grip_closed = R.squeeze_command(self.plate_half_y, robot_cls)
-    if self.friction_cone is None:
-      self.friction_cone = DEFAULT_FRICTION_CONE.get(robot_cls.name, "elliptic")
-    if self.friction_cone == "elliptic":
-      spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-      spec.option.impratio = ELLIPTIC_IMPRATIO
     if self.plate_half_y != PLATE_HALF:
       for name in ("plate", "goal"):
         g = spec.geom(name)

@@ -342,3 +342,29 @@ def test_normalizer_after_update_starts_the_ratio_at_one(env):
   assert all(r["loss/kl_mean"] > 10 * floor for r in brax[1:])
   assert not np.allclose([r["loss/kl_mean"] for r in brax], floor, rtol=1e-2)
   assert train.PPOConfig.preset("paper").normalizer_after_update and not train.PPOConfig().normalizer_after_update
+
+
+class _NaNRewardPusher(PusherEnv):
+  """The pusher with a NaN reward: what an env that blows up hands the trainer."""
+
+  def step(self, state, action):
+    s = super().step(state, action)
+    return s.replace(reward=s.reward * jnp.nan)
+
+
+def test_non_finite_losses_stop_training_naming_the_seeds(tmp_path):
+  """A diverged update raises (naming seeds, iteration and metric) instead of training NaN weights to the
+  end of the budget, and writes no checkpoint of the NaN weights."""
+  out = str(tmp_path / "run")
+  with pytest.raises(ppo.TrainingDiverged, match=r"iteration 1 .*seed 3: .*loss/.*seed 4: .*no checkpoint"):
+    train.train(_NaNRewardPusher(), seeds=SEEDS, num_timesteps=4 * ITER, checkpoint_every=ITER, out_dir=out,
+                **TINY)
+  from train import checkpoint
+  assert not os.path.exists(os.path.join(out, checkpoint.FILENAME))
+
+
+def test_non_finite_losses_per_seed():
+  m = {"loss/policy_loss": np.array([0.1, np.nan, 0.2]), "loss/v_loss": np.array([np.inf, 0.0, 1.0]),
+       "lagrange": np.array([np.nan, np.nan, np.nan])}  # only losses count
+  assert ppo.non_finite_losses(m, (7, 8, 9)) == {7: ["loss/v_loss"], 8: ["loss/policy_loss"]}
+  assert ppo.non_finite_losses({"loss/x": np.zeros(2)}, (0, 1)) == {}

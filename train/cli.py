@@ -302,6 +302,9 @@ def main(argv=None) -> int:
       result = train(task, devices=devices, **args, **config)
   except ValueError as e:
     return _error(p.prog, e)
+  except FloatingPointError as e:  # train.ppo.TrainingDiverged: says which seed, iteration and checkpoint
+    print(f"{p.prog}: {' '.join(str(e).split())}", file=sys.stderr)
+    return 1
   summary = {
       "out_dir": result.out_dir, "seeds": list(result.config.seeds), "env_steps_per_seed": result.env_steps,
       "wall_time_s": round(result.wall_time, 1), "train_throughput_steps_per_s": round(result.throughput, 1),

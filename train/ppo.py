@@ -75,6 +75,21 @@ class TrainResult:
     return jax.tree.map(lambda x: x[i], self.train_state)
 
 
+class TrainingDiverged(FloatingPointError):
+  """An update left a seed with non-finite losses: its weights are no longer usable, so training stops
+  instead of carrying NaN parameters (whose actions the env reads as 0) to the end of the budget."""
+
+
+def non_finite_losses(m: dict, seeds) -> dict:
+  """``{seed: [metric, …]}`` of the seeds whose ``loss/*`` metrics (f32[S] each) are not all finite."""
+  bad = {}
+  for k in sorted(m):
+    if k.startswith("loss/"):
+      for i in np.nonzero(~np.isfinite(np.asarray(m[k], np.float64)))[0]:
+        bad.setdefault(int(seeds[i]), []).append(k)
+  return bad
+
+
 def _read_rows(out_dir: str) -> list:
   path = os.path.join(out_dir, "metrics.jsonl")
   if not os.path.exists(path):
@@ -305,6 +320,17 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       ts, m = iteration_fn(ts)
       m = distributed.to_host(m)  # blocks: the iteration has finished; every leaf f32[S]
       timings["iterations" if iteration > start_iteration + 1 else "compile"] += time.perf_counter() - t0
+      bad = non_finite_losses(m, cfg.seeds)
+      if bad:  # before any checkpoint of this iteration, so the last one saved still holds finite weights
+        if bar is not None:
+          bar.close()
+        what = "; ".join(f"seed {s}: {', '.join(k)}" for s, k in bad.items())
+        kept = (f"the checkpoint in {ckpt_path} is from before it" if ckpt_path and os.path.exists(ckpt_path)
+                else "no checkpoint was written")
+        raise TrainingDiverged(
+            f"training diverged at iteration {iteration} ({iteration * spi:,} env steps per seed): non-finite "
+            f"{what}; {kept}. Usual causes: a non-finite observation or reward from the env (run "
+            f"benchmarks/soak.py on the task) or too large a learning rate.")
       t_host = time.perf_counter()
       for k in WINDOW_KEYS:
         window[k] += np.asarray(m[f"ended_{k}"], np.float64)
