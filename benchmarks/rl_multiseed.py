@@ -473,7 +473,11 @@ def combine(args) -> int:
   slug = payload["task"].rsplit(":", 1)[-1].lower()
   base = os.path.join(args.results_dir, f"rl_{slug}_combined_{args.tag}")
   write_results(base, payload)
-  print(f"wrote {base}.md / .json", flush=True)
+  if payload["rows"]:
+    print(f"wrote {base}.md / .json", flush=True)
+  if diverged:
+    print(f"diverged (no row): {', '.join(diverged)}", file=sys.stderr)
+    return 1
   return 0
 
 
@@ -491,8 +495,14 @@ def main(argv=None) -> int:
                      + list(sys.argv[1:] if argv is None else argv))
   payload = {"device": device, "jax": jax.__version__, "task": args.task, "eval_episodes": args.eval_episodes,
              "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
+  diverged = []
   for name in args.methods:
-    row = run_method(name, args, command, work)
+    try:
+      row = run_method(name, args, command, work)
+    except FloatingPointError as e:  # train.ppo.TrainingDiverged: no row; the other methods still run
+      print(f"{name}: {e}", file=sys.stderr, flush=True)
+      diverged.append(name)
+      continue
     row["date"] = time.strftime("%Y-%m-%d %H:%M")
     src = row.pop("curves_src")
     row["curves"] = os.path.basename(base) + f"_{name}.png"
@@ -503,7 +513,11 @@ def main(argv=None) -> int:
     write_results(base, payload)  # after every method: a timeout keeps the finished ones
     print(json.dumps({k: row[k] for k in ("label", "summary", "throughput_all_seeds", "env_steps_per_seed")},
                      indent=1), flush=True)
-  print(f"wrote {base}.md / .json", flush=True)
+  if payload["rows"]:
+    print(f"wrote {base}.md / .json", flush=True)
+  if diverged:
+    print(f"diverged (no row): {', '.join(diverged)}", file=sys.stderr)
+    return 1
   return 0
 
 

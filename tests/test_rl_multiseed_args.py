@@ -102,3 +102,18 @@ def test_task_settings_over_place_plates_rl_setting_keep_its_observation():
   a = rl_multiseed.parse(["--task", "place_plate", "--task-settings", '{"n_substeps": 5}'])
   import tasks
   assert tasks.rl_settings(a.task, a.task_settings)["obs_mode"] == "paper"
+
+
+def test_a_diverged_method_is_reported_and_the_others_still_run(monkeypatch, tmp_path, capsys):
+  ran = []
+
+  def diverge(name, *a):
+    ran.append(name)
+    raise FloatingPointError(f"training diverged at iteration 3: non-finite seed 0: loss/v_loss ({name})")
+
+  monkeypatch.setattr(rl_multiseed, "run_method", diverge)
+  status = rl_multiseed.main(["--methods", "penalty,pid", "--results-dir", str(tmp_path), "--work-dir", str(tmp_path)])
+  err = capsys.readouterr().err
+  assert status == 1 and ran == ["penalty", "pid"]
+  assert "penalty: training diverged" in err and "diverged (no row): penalty, pid" in err
+  assert not list(tmp_path.glob("*.md"))  # no table of nothing
