@@ -356,7 +356,8 @@ def test_non_finite_losses_stop_training_naming_the_seeds(tmp_path):
   """A diverged update raises (naming seeds, iteration and metric) instead of training NaN weights to the
   end of the budget, and writes no checkpoint of the NaN weights."""
   out = str(tmp_path / "run")
-  with pytest.raises(ppo.TrainingDiverged, match=r"iteration 1 .*seed 3: .*loss/.*seed 4: .*no checkpoint"):
+  with pytest.raises(ppo.TrainingDiverged, match=r"iteration 1 .*seed 3: .*loss/.*seed 4: .*loss/.*env's own .*"
+                                                  r"100 % of seed 3's transitions.*no checkpoint"):
     train.train(_NaNRewardPusher(), seeds=SEEDS, num_timesteps=4 * ITER, checkpoint_every=ITER, out_dir=out,
                 **TINY)
   from train import checkpoint
@@ -368,3 +369,8 @@ def test_non_finite_losses_per_seed():
        "lagrange": np.array([np.nan, np.nan, np.nan])}  # only losses count
   assert ppo.non_finite_losses(m, (7, 8, 9)) == {7: ["loss/v_loss"], 8: ["loss/policy_loss"]}
   assert ppo.non_finite_losses({"loss/x": np.zeros(2)}, (0, 1)) == {}
+
+
+def test_a_healthy_run_logs_no_non_finite_env_steps(smoke):
+  rows = _rows(smoke.out_dir)
+  assert rows and all(r["env_non_finite"] == 0.0 for r in rows)

@@ -304,8 +304,13 @@ class Trainer:
                     iteration=ts.iteration + 1)
     metrics = {f"ended_{k}": v for k, v in ended.items()}
     metrics.update({("sgd_steps" if k == "sgd_steps" else f"loss/{k}"): v for k, v in loss_metrics.items()})
+    # share of this rollout's transitions whose observation, reward or cost is not finite: 0 unless the
+    # physics blew up (names the env, not the learner, when train.ppo.TrainingDiverged stops a run)
+    finite = jnp.isfinite(data.reward) & jnp.isfinite(cost)
+    for leaf in jax.tree.leaves(data.observation):
+      finite &= jnp.all(jnp.isfinite(leaf).reshape(leaf.shape[:2] + (-1,)), axis=-1)
     metrics.update(step_reward=self._pmean(jnp.mean(shaped)), step_cost=self._pmean(jnp.mean(cost)),
-                   lagrange=mult.lam, budget=M.effective_budget(mult, ts.multiplier_params),
+                   env_non_finite=self._pmean(1.0 - jnp.mean(finite.astype(jnp.float32))), lagrange=mult.lam, budget=M.effective_budget(mult, ts.multiplier_params),
                    cost_estimate=cost_estimate)
     return ts, metrics
 

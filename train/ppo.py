@@ -324,7 +324,11 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       if bad:  # before any checkpoint of this iteration, so the last one saved still holds finite weights
         if bar is not None:
           bar.close()
+        env_bad = np.asarray(m.get("env_non_finite", np.zeros(len(cfg.seeds))), np.float64)
         what = "; ".join(f"seed {s}: {', '.join(k)}" for s, k in bad.items())
+        if np.any(env_bad > 0):
+          what += " (the env's own observations, rewards or costs were non-finite in " + ", ".join(
+              f"{100 * f:.3g} % of seed {s}'s transitions" for s, f in zip(cfg.seeds, env_bad) if f > 0) + ")"
         kept = (f"the checkpoint in {ckpt_path} is from before it" if ckpt_path and os.path.exists(ckpt_path)
                 else "no checkpoint was written")
         raise TrainingDiverged(
