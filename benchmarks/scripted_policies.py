@@ -175,7 +175,7 @@ def write(rows: list[dict], command: str, stem: str = "scripted_policies") -> No
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--episodes", type=int, default=256)
-  p.add_argument("--tasks", default=",".join(tasks.names()))
+  p.add_argument("--tasks", default=None, help="comma-separated (default: every task --robot runs)")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--chunk", type=int, default=0, help="episodes per policy per compiled call (default: all in one)")
   p.add_argument("--robot", default=robots.DEFAULT, help=f"one of {', '.join(robots.names())}")
@@ -188,9 +188,8 @@ def main(argv=None) -> int:
                     else f"scripted_policies_{a.robot}_{jax.default_backend()}")
   if not stem or os.sep in stem or stem.startswith("."):
     raise ValueError(f"name: must be a plain file stem, got {stem!r}")
-  names = [n for n in a.tasks.split(",") if n]
-  for n in names:
-    tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
+  # ValueError naming tasks or robot (unknown, listed twice, or not run by --robot) before anything compiles
+  names = tasks.select(None if a.tasks is None else [n for n in a.tasks.split(",") if n], a.robot)
   global COMMAND
   flags = os.environ.get("XLA_FLAGS")
   command = (f"XLA_FLAGS={flags} " if flags else "") + ".venv/bin/python benchmarks/scripted_policies.py " + " ".join(

@@ -1,0 +1,35 @@
+"""benchmarks/scripted_policies.py's task list, without running a task: by default every task the robot
+runs (a gripper-only task no longer stops a Panda run midway), and a bad list is refused up front."""
+
+import os
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+
+import scripted_policies  # noqa: E402
+import tasks  # noqa: E402
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["--robot", "panda", "--tasks", "move_glass_of_water"], "robot"),
+    (["--tasks", "place_plate,nope"], "tasks"),
+    (["--tasks", "place_plate,place_plate"], "tasks"),
+    (["--robot", "ur5"], "robot"),
+])
+def test_bad_task_lists_name_the_field(argv, field, monkeypatch):
+  ran = []
+  monkeypatch.setattr(scripted_policies, "run_task", lambda *a, **k: ran.append(a) or [])
+  with pytest.raises(ValueError, match=rf"^{field}:"):
+    scripted_policies.main(argv + ["--name", "unused_test_stem"])
+  assert not ran
+
+
+def test_default_tasks_are_those_the_robot_runs(monkeypatch):
+  ran = []
+  monkeypatch.setattr(scripted_policies, "run_task", lambda name, *a, **k: ran.append(name) or [])
+  monkeypatch.setattr(scripted_policies, "write", lambda *a, **k: None)
+  assert scripted_policies.main(["--robot", "panda", "--name", "unused_test_stem"]) == 0
+  assert ran == tasks.select(None, "panda") and "move_glass_of_water" not in ran
