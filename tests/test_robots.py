@@ -130,20 +130,6 @@ def test_panda_readers_use_forward_kinematics(bare):
   np.testing.assert_allclose(md.site_xpos[m.site("panda_grip").id], [0.1, -0.05, 0.15], atol=1e-3)
 
 
-def test_panda_posture_pull_stays_in_the_nullspace(bare):
-  """A zero task error moves the hand < 0.2 mm per control step while the posture pull turns the joints
-  (with the task step's damping in the projector it moved 0.3–0.9 mm from these poses)."""
-  _, _, robot = bare
-  rng = np.random.default_rng(0)
-  for _ in range(8):
-    q = jnp.asarray(P.Q_READY + rng.uniform(-0.6, 0.6, 7), jnp.float32)
-    p0, _, jac = robot.kinematics(q)
-    dq = P.dls_step(q, jac.at[3:].multiply(P.ROT_WEIGHT), jnp.zeros(6), jnp.asarray(P.Q_READY, q.dtype),
-                    P.NULL_GAIN)
-    assert float(jnp.linalg.norm(dq)) > 0.005  # the posture pull is at work
-    assert float(jnp.linalg.norm(robot.kinematics(q + dq)[0] - p0)) < 2e-4
-
-
 def test_ik_tracks_figure_eight_within_5mm():
   dt = 0.004 * checks.N_SUBSTEPS
   wp = checks.figure_eight(int(5.5 / dt), dt)  # one 5 s period after a 0.5 s settle

@@ -65,7 +65,6 @@ LIMIT_MARGIN = 0.02  # rad, joint targets stay this far inside the range (servo 
 DAMPING = 0.05  # DLS damping λ (m): keeps Δq bounded near singularities (stretched arm)
 ROT_WEIGHT = 0.5  # m/rad: 1 rad of orientation error weighs like 0.5 m of position error
 NULL_GAIN = 0.1  # fraction of the posture error removed per control step, in the nullspace
-NULL_DAMPING = 0.005  # nullspace projector's damping μ (m): see dls_step
 MAX_ROT = 0.1  # rad per control step for the wrist action (PandaWrist)
 IK_ITERS = 60  # DLS iterations of the reset-time IK (converges to < 0.1 mm in the workspace)
 
@@ -140,18 +139,19 @@ def _spd_solve(a, b):
   return jnp.stack(x)
 
 
-def dls_step(q, jac, err, q_posture, null_gain, damping=DAMPING, null_damping=NULL_DAMPING):
+def dls_step(q, jac, err, q_posture, null_gain, damping=DAMPING):
   """Damped-least-squares joint step f32[7] for task error ``err`` f32[6] plus a nullspace posture pull.
 
-  The projector ``I − Jᵀ(JJᵀ + μ²I)⁻¹J`` has its own, small damping μ = ``null_damping``: with the
-  task step's λ it would pass a fraction λ²/(σ² + λ²) of the posture pull into the hand's motion
-  (σ a singular value of J), so a zero action let the hand creep toward wherever the ready posture
-  puts it (≈ 0.7 mm per control step in Place Plate's in-hand start). It stays a projector for any
-  μ > 0 (eigenvalues in [0, 1)), so a small μ is safe near singularities."""
-  eye = jnp.eye(6, dtype=jac.dtype)
-  jjt = jac @ jac.T
-  dq = jac.T @ _spd_solve(jjt + damping**2 * eye, err[:, None])[:, 0]
-  null = jnp.eye(7, dtype=jac.dtype) - jac.T @ _spd_solve(jjt + null_damping**2 * eye, jac)
+  The projector ``I − Jᵀ(JJᵀ + λ²I)⁻¹J`` shares the task step's damping λ, so a fraction λ²/(σ² + λ²)
+  of the posture pull reaches the hand (σ a singular value of J): under a zero action the hand creeps
+  toward wherever the ready posture puts it, ≈ 0.7 mm per control step in Place Plate's in-hand
+  start. A projector with its own small damping stops that, but it changes how the arm moves in
+  contact (open_drawer's safe pull then broke the drawer, place_plate's safe placement lost 44 % of
+  its safe completions), so every Panda scripted policy would need retuning with it."""
+  a = jac @ jac.T + damping**2 * jnp.eye(6, dtype=jac.dtype)
+  x = _spd_solve(a, jnp.concatenate([err[:, None], jac], axis=1))  # [A⁻¹e, A⁻¹J]
+  dq = jac.T @ x[:, 0]
+  null = jnp.eye(7, dtype=jac.dtype) - jac.T @ x[:, 1:]
   return dq + null @ (null_gain * (q_posture - q))
 
 
