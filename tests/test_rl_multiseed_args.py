@@ -11,6 +11,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 
 import rl_multiseed  # noqa: E402
+from train.ppo import TrainingDiverged  # noqa: E402
 
 
 @pytest.mark.parametrize("argv, field", [
@@ -109,7 +110,7 @@ def test_a_diverged_method_is_reported_and_the_others_still_run(monkeypatch, tmp
 
   def diverge(name, *a):
     ran.append(name)
-    raise FloatingPointError(f"training diverged at iteration 3: non-finite seed 0: loss/v_loss ({name})")
+    raise TrainingDiverged(f"training diverged at iteration 3: non-finite seed 0: loss/v_loss ({name})")
 
   monkeypatch.setattr(rl_multiseed, "run_method", diverge)
   status = rl_multiseed.main(["--methods", "penalty,pid", "--results-dir", str(tmp_path), "--work-dir", str(tmp_path)])

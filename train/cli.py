@@ -272,7 +272,7 @@ def main(argv=None) -> int:
 
   import jax  # after the checks: keeps --help and user errors fast
 
-  from train.ppo import train
+  from train.ppo import TrainingDiverged, train
   try:  # connects the processes (bounded wait), then what needs the devices; still nothing compiled
     distributed.initialize(setup, p.prog)
     if setup.multi_process:
@@ -302,7 +302,7 @@ def main(argv=None) -> int:
       result = train(task, devices=devices, **args, **config)
   except ValueError as e:
     return _error(p.prog, e)
-  except FloatingPointError as e:  # train.ppo.TrainingDiverged: says which seed, iteration and checkpoint
+  except TrainingDiverged as e:  # says which seeds, iteration and checkpoint
     print(f"{p.prog}: {' '.join(str(e).split())}", file=sys.stderr)
     return 1
   summary = {

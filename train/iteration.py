@@ -310,7 +310,8 @@ class Trainer:
     for leaf in jax.tree.leaves(data.observation):
       finite &= jnp.all(jnp.isfinite(leaf).reshape(leaf.shape[:2] + (-1,)), axis=-1)
     metrics.update(step_reward=self._pmean(jnp.mean(shaped)), step_cost=self._pmean(jnp.mean(cost)),
-                   env_non_finite=self._pmean(1.0 - jnp.mean(finite.astype(jnp.float32))), lagrange=mult.lam, budget=M.effective_budget(mult, ts.multiplier_params),
+                   env_non_finite=self._pmean(1.0 - jnp.mean(finite.astype(jnp.float32))),
+                   lagrange=mult.lam, budget=M.effective_budget(mult, ts.multiplier_params),
                    cost_estimate=cost_estimate)
     return ts, metrics
 

@@ -90,6 +90,22 @@ def non_finite_losses(m: dict, seeds) -> dict:
   return bad
 
 
+def _diverged(bad: dict, m: dict, seeds, iteration: int, env_steps: int, ckpt_path) -> TrainingDiverged:
+  """The error for :func:`non_finite_losses`' ``bad`` seeds, saying whether the env itself produced the
+  non-finite values (``m["env_non_finite"]``) and what the checkpoint at ``ckpt_path`` still holds."""
+  env_bad = np.asarray(m.get("env_non_finite", np.zeros(len(seeds))), np.float64)
+  what = "; ".join(f"seed {s}: {', '.join(k)}" for s, k in bad.items())
+  if np.any(env_bad > 0):
+    what += " (the env's own observations, rewards or costs were non-finite in " + ", ".join(
+        f"{100 * f:.3g} % of seed {s}'s transitions" for s, f in zip(seeds, env_bad) if f > 0) + ")"
+  kept = (f"the checkpoint in {ckpt_path} is from before it" if ckpt_path and os.path.exists(ckpt_path)
+          else "no checkpoint was written")
+  return TrainingDiverged(
+      f"training diverged at iteration {iteration} ({env_steps:,} env steps per seed): non-finite {what}; "
+      f"{kept}. Usual causes: a non-finite observation or reward from the env (run benchmarks/soak.py on "
+      f"the task) or too large a learning rate.")
+
+
 def _read_rows(out_dir: str) -> list:
   path = os.path.join(out_dir, "metrics.jsonl")
   if not os.path.exists(path):
@@ -324,17 +340,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       if bad:  # before any checkpoint of this iteration, so the last one saved still holds finite weights
         if bar is not None:
           bar.close()
-        env_bad = np.asarray(m.get("env_non_finite", np.zeros(len(cfg.seeds))), np.float64)
-        what = "; ".join(f"seed {s}: {', '.join(k)}" for s, k in bad.items())
-        if np.any(env_bad > 0):
-          what += " (the env's own observations, rewards or costs were non-finite in " + ", ".join(
-              f"{100 * f:.3g} % of seed {s}'s transitions" for s, f in zip(cfg.seeds, env_bad) if f > 0) + ")"
-        kept = (f"the checkpoint in {ckpt_path} is from before it" if ckpt_path and os.path.exists(ckpt_path)
-                else "no checkpoint was written")
-        raise TrainingDiverged(
-            f"training diverged at iteration {iteration} ({iteration * spi:,} env steps per seed): non-finite "
-            f"{what}; {kept}. Usual causes: a non-finite observation or reward from the env (run "
-            f"benchmarks/soak.py on the task) or too large a learning rate.")
+        raise _diverged(bad, m, cfg.seeds, iteration, iteration * spi, ckpt_path)
       t_host = time.perf_counter()
       for k in WINDOW_KEYS:
         window[k] += np.asarray(m[f"ended_{k}"], np.float64)
