@@ -123,27 +123,34 @@ def group_by_type(geom_ids, geom_type: np.ndarray) -> tuple[tuple[int, np.ndarra
   return tuple(out)
 
 
-def points_to_geoms_planes(groups, d, m, points: jax.Array) -> tuple[jax.Array, list]:
-  """:func:`points_to_geoms` with the normals as planes: (phi f32[P, G], [nx, ny, nz] f32[P, G] each).
+def group_planes(gtype: int, ids: np.ndarray, d, m, points: jax.Array) -> tuple[jax.Array, list]:
+  """Signed distances and world normals of points to the geoms ``ids`` of ONE static type, as planes.
 
-  Every per-pair quantity is an elementwise expression of [P, G] planes (the
-  rotations are 9 multiply-adds, not a batched matrix product), so XLA fuses
-  the whole pass into one loop over particle–geom pairs.
+  Returns phi f32[P, Gt] and [nx, ny, nz] (each broadcasting to [P, Gt]). Every
+  per-pair quantity is an elementwise expression of [P, Gt] planes (the rotations are
+  9 multiply-adds, not a batched matrix product), so XLA fuses the whole pass into
+  one loop over particle–geom pairs, or into the reduction that consumes it.
   """
+  pos = d.geom_xpos[ids]  # [G, 3]
+  mat = d.geom_xmat[ids].reshape(-1, 3, 3)  # [G, 3, 3] columns = geom axes in world
+  size = jnp.asarray(m.geom_size)[ids]
+  rel = [points[:, k : k + 1] - pos[None, :, k] for k in range(3)]  # [P, G] each
+  q = [sum(rel[j] * mat[None, :, j, i] for j in range(3)) for i in range(3)]  # Rᵀ·(p − c)
+  phi, n_local = sdf_planes(gtype, q, [size[None, :, k] for k in range(3)])
+  return phi, [sum(mat[None, :, i, j] * n_local[j] for j in range(3)) for i in range(3)]  # R·n
+
+
+def points_to_geoms_planes(groups, d, m, points: jax.Array) -> tuple[jax.Array, list]:
+  """:func:`points_to_geoms` with the normals as planes: (phi f32[P, G], [nx, ny, nz] f32[P, G] each)."""
   P = points.shape[0]
   if not groups:
     z = jnp.zeros((P, 0), points.dtype)
     return z, [z, z, z]
   phis, normals = [], []
   for gtype, ids in groups:
-    pos = d.geom_xpos[ids]  # [G, 3]
-    mat = d.geom_xmat[ids].reshape(-1, 3, 3)  # [G, 3, 3] columns = geom axes in world
-    size = jnp.asarray(m.geom_size)[ids]
-    rel = [points[:, k : k + 1] - pos[None, :, k] for k in range(3)]  # [P, G] each
-    q = [sum(rel[j] * mat[None, :, j, i] for j in range(3)) for i in range(3)]  # Rᵀ·(p − c)
-    phi, n_local = sdf_planes(gtype, q, [size[None, :, k] for k in range(3)])
+    phi, n = group_planes(gtype, ids, d, m, points)
     phis.append(phi)
-    normals.append([sum(mat[None, :, i, j] * n_local[j] for j in range(3)) for i in range(3)])  # R·n
+    normals.append(n)
   phi = jnp.concatenate(phis, axis=1)
   return phi, [jnp.concatenate([jnp.broadcast_to(n[i], phi_g.shape) for n, phi_g in zip(normals, phis)], axis=1)
                for i in range(3)]

@@ -291,8 +291,23 @@ def _partners(lm: LiquidModel, p: jax.Array):
   return (lambda x: [x[:, k][j] for k in range(3)]), valid
 
 
+def _sums(terms: tuple) -> tuple:
+  """Sums over axis 1 of several f32[P, K] terms (pairs or particle–geom columns) in ONE variadic reduction.
+
+  The terms are elementwise expressions sharing subexpressions (squared distances,
+  normals). As separate ``jnp.sum`` calls XLA:GPU stored the shared parts as
+  [envs, P, K] arrays between them and read them back (for all particle pairs at
+  32768 envs × 128 particles, 2 GB an array: the pair pass was 2/3 of the liquid's
+  time); one reduction with several outputs needs no such array. Measured by
+  ``benchmarks/liquid_speed.py`` (results/liquid_speed_gpu_h200.md): summing the
+  stacked terms instead is 2.5× slower on a GPU, and slower on XLA:CPU too.
+  """
+  zeros = tuple(jnp.zeros((), t.dtype) for t in terms)
+  return tuple(jax.lax.reduce(terms, zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (1,)))
+
+
 def _pair_geometry(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
-  """(near bool[P, C], dist f32[P, C] m, three f32[P, C] components of the unit vectors partner → particle).
+  """(near bool[P, C], inv f32[P, C] 1/distance or 0, three f32[P, C] components of partner → particle).
 
   Coordinates are kept as separate [P, C] planes (partners on the minor axis)
   so every pair quantity is a contiguous, vectorisable row and the reductions
@@ -303,7 +318,7 @@ def _pair_geometry(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
   skin = _SKIN * 2.0 * lm.radius
   near = valid & (d2 < skin * skin)
   inv = jnp.where(near, jax.lax.rsqrt(jnp.maximum(d2, 1e-12)), 0.0)  # one rsqrt: no sqrt + divide
-  return near, d2 * inv, [c * inv for c in diff]
+  return near, d2, inv, diff
 
 
 def _pair_push(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
@@ -311,15 +326,15 @@ def _pair_push(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
 
   The push is capped at r/4 per particle per substep so a dense pile can never
   shove a particle through a thin wall in one step. Pairs within 2.2 r count as
-  touching (a 10 % skin so resting neighbours count). Elementwise products
-  summed over partners (no einsum): XLA fuses the pass into one loop and never
-  stores a [P, C, 3] pair table.
+  touching (a 10 % skin so resting neighbours count). Push along the unit vector
+  n = diff/‖diff‖ by the overlap: overlap · inv · diff, so no normal is formed.
   """
-  near, dist, nrm = _pair_geometry(lm, p, pj, valid)
-  overlap = jnp.where(near, jnp.maximum(2.0 * lm.radius - dist, 0.0), 0.0)
-  push = 0.5 * lm.pair_stiffness * jnp.stack([jnp.sum(overlap * c, axis=1) for c in nrm], axis=-1)
+  near, d2, inv, diff = _pair_geometry(lm, p, pj, valid)
+  w = jnp.where(near, jnp.maximum(2.0 * lm.radius - d2 * inv, 0.0), 0.0) * inv
+  sx, sy, sz, touching = _sums((w * diff[0], w * diff[1], w * diff[2], near.astype(p.dtype)))
+  push = 0.5 * lm.pair_stiffness * jnp.stack([sx, sy, sz], axis=-1)
   n = jnp.linalg.norm(push, axis=-1, keepdims=True)
-  count = jnp.maximum(jnp.sum(near, axis=1, keepdims=True), 1).astype(p.dtype)
+  count = jnp.maximum(touching, 1.0)[:, None]
   return push * jnp.minimum(1.0, 0.25 * lm.radius / jnp.maximum(n, 1e-12)), count
 
 
@@ -330,13 +345,111 @@ def _pair_damp(lm: LiquidModel, p, pj, valid, count, v: jax.Array, vj: list) -> 
   pile upward; damping the pairs' relative normal velocity (a dashpot, averaged
   over each particle's ``count`` touching partners so the Jacobi update never
   overshoots) only removes energy, which is what lets a glass of liquid come to
-  rest. The pair normals are recomputed from ``p`` (the predicted positions the
-  push used): cheaper on a GPU than keeping [P, C, 3] normals alive across the
-  geom passes.
+  rest. The pair geometry is recomputed from ``p`` (the predicted positions the
+  push used) inside this pass's own reduction: the optimisation barrier keeps
+  XLA from merging it with the push's, which would keep [P, C] normals alive
+  in memory across the geom passes.
   """
-  _, _, nrm = _pair_geometry(lm, p, pj, valid)
-  vn = sum((v[:, k : k + 1] - vj[k]) * nrm[k] for k in range(3))  # [P, C], > 0 separating
-  return -0.5 * jnp.stack([jnp.sum(vn * c, axis=1) for c in nrm], axis=-1) / count
+  p, pj = jax.lax.optimization_barrier((p, pj))
+  _, _, inv, diff = _pair_geometry(lm, p, pj, valid)
+  # vn·n = (Δv·diff)·diff / ‖diff‖², so the unit normal is never formed either
+  vn = sum((v[:, k : k + 1] - vj[k]) * diff[k] for k in range(3)) * inv * inv  # [P, C]
+  sx, sy, sz = _sums(tuple(vn * diff[k] for k in range(3)))
+  return -0.5 * jnp.stack([sx, sy, sz], axis=-1) / count
+
+
+_NO_COLUMN = np.iinfo(np.int32).max
+
+
+def _wet_bits(lm: LiquidModel, phi: jax.Array, cols: np.ndarray) -> tuple:
+  """Per column of ``cols`` (static), the bit of its tracked link where the particle wets it.
+
+  ``phi`` f32[P, Gt] signed distances after the pass. Returns one u32[P, Gt] word per 32
+  links: bit l % 32 of word l // 32 is set where the column belongs to link l and
+  φ − r < contact_distance. OR-reduced over columns, they say which links a particle
+  wets, each once however many of the link's geoms it touches.
+  """
+  link = lm.column_link[cols]  # static i32[Gt], −1: not a tracked link
+  words = max(1, -(-lm.column_link_mask.shape[1] // 32))
+  wet = (phi - lm.radius) < lm.contact_distance
+  out = []
+  for w in range(words):
+    mine = (link >= 0) & (link // 32 == w)
+    bit = np.where(mine, np.left_shift(np.uint32(1), np.where(mine, link % 32, 0).astype(np.uint32)), np.uint32(0))
+    out.append(jnp.where(wet & (bit != 0)[None, :], jnp.asarray(bit)[None, :], jnp.uint32(0)))
+  return tuple(out)
+
+
+def _unpack_bits(bits: tuple, num_links: int) -> jax.Array:
+  """bool[P, L] from the words of :func:`_wet_bits`."""
+  link = np.arange(num_links)
+  word = jnp.stack(bits, axis=-1)[:, link // 32]  # [P, L]
+  return (jnp.right_shift(word, jnp.asarray(link % 32, jnp.uint32)) & 1) == 1
+
+
+def _closer(a: tuple, b: tuple):
+  """b's record replaces a's: a smaller distance, ties to the lower column (argmin's rule)."""
+  return (b[0] < a[0]) | ((b[0] == a[0]) & (b[4] < a[4]))
+
+
+def _merge_closest(a: tuple, b: tuple) -> tuple:
+  """Two closest-geom records (phi, nx, ny, nz, column, wet words) combined."""
+  take = _closer(a, b)
+  return tuple(jnp.where(take, y, x) for x, y in zip(a[:5], b[:5])) + (tuple(x | y for x, y in zip(a[5], b[5])),)
+
+
+def _geom_pass(lm: LiquidModel, d, m, p: jax.Array, last: bool):
+  """One projection pass of every particle against every collidable geom, as reductions over the geoms.
+
+  Returns the push f32[P, 3] (every geom the particle's sphere penetrates pushes it out
+  along its normal by the depth) and, on the ``last`` pass, the closest-geom record
+  (φ after the push f32[P], its normal as three f32[P], its column i32[P], the wet-link
+  words u32[P] each) over every column but the world's planes (which act after the
+  pass, see :func:`advance`); otherwise None. Each type group is one variadic
+  reduction: the per-(particle, geom) distances and normals are computed inside its
+  loop and never stored, which on a GPU is what the pass's time is.
+  """
+  world = set(lm.world_planes)
+  step, closest, offset = None, None, 0
+  for gtype, ids in lm.groups:
+    cols = np.arange(offset, offset + len(ids))
+    offset += len(ids)
+    phi, n = G.group_planes(gtype, ids, d, m, p)  # [P, Gt], normals broadcasting to it
+    pen = jnp.maximum(lm.radius - phi, 0.0)
+    terms = tuple(pen * c for c in n)
+    if not last:
+      sums = _sums(terms)
+    else:
+      after = phi + pen  # φ after the push: exact for the geom pushed along its own normal
+      skip = np.array([c in world for c in cols])
+      val = jnp.where(jnp.asarray(skip)[None, :], jnp.inf, after)
+      idx = jnp.broadcast_to(jnp.asarray(cols, jnp.int32)[None, :], val.shape)
+      bits = _wet_bits(lm, jnp.where(jnp.asarray(skip)[None, :], jnp.inf, after), cols)
+      rec = (val,) + tuple(jnp.broadcast_to(c, val.shape) for c in n) + (idx,)
+      out = _reduce_geoms(terms, rec, bits)
+      sums, group_closest = out[:3], tuple(out[3:8]) + (tuple(out[8:]),)
+      closest = group_closest if closest is None else _merge_closest(closest, group_closest)
+    s = jnp.stack(sums, axis=-1)
+    step = s if step is None else step + s
+  return step, closest
+
+
+def _reduce_geoms(sums: tuple, rec: tuple, bits: tuple) -> tuple:
+  """One variadic reduction over axis 1: the sums, the closest record (argmin's rule), the OR of the words."""
+  ns = len(sums)
+  init = (tuple(jnp.zeros((), t.dtype) for t in sums)
+          + (jnp.float32(jnp.inf), jnp.float32(0), jnp.float32(0), jnp.float32(0), jnp.int32(_NO_COLUMN))
+          + tuple(jnp.uint32(0) for _ in bits))
+
+  def combine(a, b):
+    s = tuple(x + y for x, y in zip(a[:ns], b[:ns]))
+    ra, rb = a[ns : ns + 5], b[ns : ns + 5]
+    take = _closer(ra, rb)
+    r = tuple(jnp.where(take, y, x) for x, y in zip(ra, rb))
+    w = tuple(x | y for x, y in zip(a[ns + 5 :], b[ns + 5 :]))
+    return s + r + w
+
+  return jax.lax.reduce(sums + rec + bits, init, combine, (1,))
 
 
 def _surface_velocity(lm: LiquidModel, d, col: jax.Array, p: jax.Array) -> jax.Array:
@@ -369,30 +482,34 @@ def advance(m, binding, d, ds, dt):
     p = p + push
   ncol = lm.column_geom.size
   if ncol:
-    for _ in range(lm.iterations):  # static: a few projection passes
-      phi, n = G.points_to_geoms_planes(lm.groups, d, m, p)  # [P, G], normals as x, y, z planes
-      pen = jnp.maximum(r - phi, 0.0)  # [P, G] depth of the particle's sphere in each geom
-      step = jnp.stack([jnp.sum(pen * c, axis=1) for c in n], axis=-1)
+    for it in range(lm.iterations):  # static: a few projection passes
+      step, closest = _geom_pass(lm, d, m, p, last=it == lm.iterations - 1)
       p = p + step
-    phi = phi + pen  # after the last push (exact for the geom pushed along its own normal)
     # The world's planes have the last word: a particle squeezed between a moving body and the floor
     # (a glass set down on it) gets opposite pushes that can sum downward, and once below a plane it
     # is lost from the scene. φ to a plane is linear in p, so its value after the pass is exact.
+    lifts, planes = [], []
     for k in lm.world_planes:
-      nk = jnp.stack([c[:, k] for c in n], axis=-1)  # [P, 3]
-      phi_k = phi[:, k] - pen[:, k] + jnp.sum(step * nk, axis=-1)
+      g = int(lm.column_geom[k])
+      nk = d.geom_xmat[g].reshape(3, 3)[:, 2]  # the plane's +z axis, world frame
+      phi_k = (p - d.geom_xpos[g]) @ nk  # [P], after the pass, before any plane's lift
       below = jnp.maximum(r - phi_k, 0.0)
-      p = p + below[:, None] * nk
-      phi = phi.at[:, k].set(phi_k + below)
+      lifts.append(below[:, None] * nk)
+      planes.append((k, phi_k + below, nk))
+    for lift in lifts:
+      p = p + lift
+    for k, phi_k, nk in planes:  # merged into the closest-geom record, ties to the lower column as argmin
+      key = (phi_k, nk[0] + 0.0 * phi_k, nk[1] + 0.0 * phi_k, nk[2] + 0.0 * phi_k, jnp.full_like(closest[4], k),
+             tuple(w[:, 0] for w in _wet_bits(lm, phi_k[:, None], np.array([k]))))
+      closest = _merge_closest(closest, key)
   v = (p - p0) / dt
   if pairs:
     v = v + _pair_damp(lm, p_pair, take(p_pair), valid, count, v, take(v))
   if ncol:
     # friction and no approach against the closest geom, in that geom's moving frame
-    j = jnp.argmin(phi, axis=1)  # [P]
-    closest = j[:, None] == jnp.arange(ncol)[None, :]  # [P, G] one-hot: a select, not a gather
-    gap = jnp.min(phi, axis=1) - r
-    nj = jnp.stack([jnp.sum(jnp.where(closest, c, 0.0), axis=1) for c in n], axis=-1)  # [P, 3]
+    phi_min, nx, ny, nz, j, bits = closest
+    nj = jnp.stack([nx, ny, nz], axis=-1)  # [P, 3]
+    gap = phi_min - r
     vg = _surface_velocity(lm, d, j, p)
     rel = v - vg
     vn = jnp.sum(rel * nj, axis=-1, keepdims=True)
@@ -400,11 +517,8 @@ def advance(m, binding, d, ds, dt):
     in_contact = (gap < 0.25 * r)[:, None]
     rel_c = jnp.maximum(vn, 0.0) * nj + (1.0 - lm.friction) * vt
     v = jnp.where(in_contact, vg + rel_c, v)
-    wet = (phi - r) < lm.contact_distance  # [P, G]
-    # a particle touching several geoms of one link counts once: any over the link's columns
-    # (a static column → link mask, an elementwise reduce rather than a scatter)
-    per_link = jnp.any(wet[:, :, None] & lm.column_link_mask[None], axis=1)  # [P, L]
-    exposure = jnp.sum(per_link, axis=0).astype(jnp.float32)
+    # a particle touching several geoms of one link counts once: one bit per link
+    exposure = jnp.sum(_unpack_bits(bits, lm.column_link_mask.shape[1]), axis=0).astype(jnp.float32)
   else:
     exposure = jnp.zeros_like(ds.exposure)
   speed = jnp.linalg.norm(v, axis=-1, keepdims=True)

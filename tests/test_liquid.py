@@ -320,3 +320,63 @@ def test_floor_has_the_last_word_over_a_body_pressed_onto_it(scene):
     for _ in range(20):
       ds = Lq.advance(mx, b, d, ds, float(m.opt.timestep))
     assert float(jnp.min(ds.liquid.pos[:, 2])) >= R - 1e-6, z
+
+
+def _scattered(b, seed=0, spread=0.05):
+  """Particles scattered around the glass (inside, in its walls, under the floor): every geom case."""
+  k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
+  centre = jnp.array([0.0, 0.0, 0.35])  # the glass
+  p = centre + jax.random.normal(k1, (b.liquid.num_particles, 3)) * spread
+  p = p.at[:4].set(jnp.array([[0, 0, -0.003], [0.3, 0, 0.001], [0, 0, 0.0], [0, 0.2, 0.004]]))  # at the floor
+  p = p.at[4:8].set(jnp.array([[0.4, 0, 0.035], [0.5, 0.05, 0.03], [0.26, 0, 0.02], [0.4, 0.1, 0.02]]))  # on the laptop
+  return p, jax.random.normal(k2, p.shape) * 0.3
+
+
+def test_geom_pass_reductions_equal_the_dense_particle_geom_table(scene):
+  """The pass's reductions give what the dense [P, G] table gives: push, closest geom, its normal, wet links."""
+  _, mx, b, _, _ = scene
+  lm = b.liquid
+  d = jax.jit(mjx.kinematics)(mx, tilt_data(mx, 0.4))
+  p, _ = _scattered(b)
+  step, (phi_min, nx, ny, nz, col, bits) = Lq._geom_pass(lm, d, mx, p, last=True)
+  phi, n = G.points_to_geoms_planes(lm.groups, d, mx, p)
+  pen = jnp.maximum(R - phi, 0.0)
+  dense_step = jnp.stack([jnp.sum(pen * c, axis=1) for c in n], axis=-1)
+  np.testing.assert_allclose(step, dense_step, atol=1e-7)
+  after = jnp.where(jnp.isin(jnp.arange(phi.shape[1]), jnp.array(lm.world_planes, jnp.int32)), jnp.inf, phi + pen)
+  j = jnp.argmin(after, axis=1)
+  np.testing.assert_array_equal(col, j)
+  np.testing.assert_allclose(phi_min, jnp.min(after, axis=1), atol=0)
+  for k, c in enumerate(n):
+    np.testing.assert_allclose([nx, ny, nz][k], jnp.take_along_axis(c, j[:, None], axis=1)[:, 0], atol=0)
+  wet = (after - R) < lm.contact_distance
+  dense_links = jnp.any(wet[:, :, None] & lm.column_link_mask[None], axis=1)
+  got = Lq._unpack_bits(bits, lm.column_link_mask.shape[1])
+  np.testing.assert_array_equal(got, dense_links)
+  assert bool(jnp.any(dense_links)) and bool(jnp.any(pen > 0))  # the case is not vacuous
+
+
+def test_pair_passes_equal_the_pairwise_formulas(scene):
+  """Pair push and damping from the reductions equal the per-pair formulas written out densely."""
+  _, _, b, _, _ = scene
+  lm = b.liquid
+  p, v = _scattered(b, seed=3, spread=0.012)
+  p = p.at[:8].set(p[8:16] + 0.002)  # no stragglers at the floor: a dense clump
+  take, valid = Lq._partners(lm, p)
+  push, count = Lq._pair_push(lm, p, take(p), valid)
+  damp = Lq._pair_damp(lm, p, take(p), valid, count, v, take(v))
+  pn, vn_ = np.asarray(p, np.float64), np.asarray(v, np.float64)
+  diff = pn[:, None, :] - pn[None, :, :]
+  dist = np.linalg.norm(diff, axis=-1)
+  np.fill_diagonal(dist, np.inf)
+  near = dist < 1.1 * 2 * R
+  nrm = np.where(near[..., None], diff / np.where(near, dist, 1.0)[..., None], 0.0)
+  overlap = np.where(near, np.maximum(2 * R - dist, 0.0), 0.0)
+  raw = 0.5 * lm.pair_stiffness * np.sum(overlap[..., None] * nrm, axis=1)
+  cap = np.minimum(1.0, 0.25 * R / np.maximum(np.linalg.norm(raw, axis=-1, keepdims=True), 1e-12))
+  np.testing.assert_allclose(push, raw * cap, atol=2e-7)
+  cnt = np.maximum(near.sum(1), 1)[:, None]
+  np.testing.assert_allclose(count, cnt)
+  rel = np.sum((vn_[:, None, :] - vn_[None, :, :]) * nrm, axis=-1)
+  np.testing.assert_allclose(damp, -0.5 * np.sum(rel[..., None] * nrm, axis=1) / cnt, atol=2e-6)
+  assert near.sum() > P and (overlap > 0).any()  # many touching pairs: not vacuous
