@@ -19,6 +19,10 @@ steps of ``vmap(step)``, compiled ahead of time and timed after one warm-up call
 * ``raw_moving``    — the same with the controls the task's ``robot.ctrl`` makes of uniform
                       random actions each step: MJX's solver stops early once every env has
                       converged, so a moving robot can cost more physics than one at rest.
+* ``raw_replay``    — ``n_substeps × mjx.step`` from the same reset states, replaying the very
+                      controls the ``task`` variant applied (recorded from one run of it): the
+                      same physics the task step does, with nothing else. ``task`` over
+                      ``raw_replay`` is the share of the step that is physics.
 
 The ``ratio`` column is env-steps/s of the variant over ``raw``; ``share of task
 step`` is the time the variant removes, 1 − t_variant / t_task. The policy
@@ -58,7 +62,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))  # the repo's packages, wherever this is run from
 
 VARIANTS = ("task", "zeros_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage", "raw",
-            "raw_moving")
+            "raw_moving", "raw_replay")
 POLICIES = ("mlp", "zeros", "scripted")
 
 
@@ -98,6 +102,25 @@ def _physics_override(task, variant: str):
   else:
     return None
   return lambda d, ds, ctrl: physics.step(sys_, b, d.replace(ctrl=ctrl), ds, n)
+
+
+def _task_controls(env, policy, state, steps: int):
+  """The controls (``d.ctrl`` after each step, f32[steps, envs, nu]) of ``steps`` task steps from ``state``.
+
+  The same keys as the ``task`` variant's first timed call, so ``raw_replay`` steps the
+  physics that variant's policy drove."""
+  import jax
+
+  envs = state.obs.shape[0]
+
+  def body(c, _):
+    s, k = c
+    k, kp = jax.random.split(k)
+    a = jax.vmap(policy)(s, jax.random.split(kp, envs))
+    s = jax.vmap(env.step)(s, a)
+    return (s, k), s.pipeline_state.ctrl
+
+  return jax.jit(lambda s: jax.lax.scan(body, (s, jax.random.PRNGKey(1)), None, length=steps)[1])(state)
 
 
 def applicable(task, variant: str) -> bool:
@@ -146,6 +169,17 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
       return jax.lax.scan(body, carry, None, length=steps)[0]
 
     carry = (state.pipeline_state, jax.random.PRNGKey(1))
+  elif variant == "raw_replay":
+    n = task.n_substeps
+    ctrls = _task_controls(env, policy, state, steps)  # f32[steps, envs, nu], what `task` applied
+
+    def run(carry):
+      def body(d, ctrl):
+        return jax.vmap(lambda d1, c1: physics.step_without_damage(task.sys, d1.replace(ctrl=c1), n))(d, ctrl), None
+      d, ctrls = carry
+      return jax.lax.scan(body, d, ctrls)[0], ctrls
+
+    carry = (state.pipeline_state, ctrls)
   else:
     def run(carry):
       def body(c, _):
@@ -217,13 +251,15 @@ def precompile(argv: list[str], pairs: list[tuple[str, str]], workers: int) -> N
 
 
 def summarise(rows: list[dict]) -> list[dict]:
-  """Adds ``ratio_to_raw`` and ``share_of_task_step`` to each row (per task)."""
+  """Adds ``ratio_to_raw``, ``ratio_to_replay`` and ``share_of_task_step`` to each row (per task)."""
   robot = lambda r: r.get("robot", "gripper")  # noqa: E731  (rows written before --robot: the gripper)
   rows = sorted(rows, key=lambda r: (r["task"], robot(r), VARIANTS.index(r["variant"])))
   by = {(r["task"], robot(r), r["variant"]): r for r in rows}
   for r in rows:
     raw, task = by.get((r["task"], robot(r), "raw")), by.get((r["task"], robot(r), "task"))
+    replay = by.get((r["task"], robot(r), "raw_replay"))
     r["ratio_to_raw"] = r["env_steps_per_s"] / raw["env_steps_per_s"] if raw else None
+    r["ratio_to_replay"] = r["env_steps_per_s"] / replay["env_steps_per_s"] if replay else None
     r["share_of_task_step"] = 1.0 - r["wall_s"] / task["wall_s"] if task and r["variant"] != "task" else None
   return rows
 
@@ -235,16 +271,18 @@ def markdown(record: dict) -> str:
       f"policy {record['policy']} · {record['clock']} clock · {record['timestamp_utc']}",
       "",
       "ratio = env-steps/s over `raw` (n_substeps × mjx.step, same model and batch); share = time the variant "
-      "removes from the task step (1 − t_variant / t_task).",
+      "removes from the task step (1 − t_variant / t_task); ratio to the same physics = env-steps/s over "
+      "`raw_replay` (the controls the task step applied, replayed through n_substeps × mjx.step).",
       "",
-      "| task | robot | variant | env-steps/s | ratio to raw | share of task step | compile s |",
-      "|---|---|---|---:|---:|---:|---:|",
+      "| task | robot | variant | env-steps/s | ratio to raw | ratio to the same physics | share of task step | compile s |",
+      "|---|---|---|---:|---:|---:|---:|---:|",
   ]
   for r in record["results"]:
     ratio = "" if r["ratio_to_raw"] is None else f"{r['ratio_to_raw']:.3f}"
     share = "" if r["share_of_task_step"] is None else f"{100 * r['share_of_task_step']:.1f} %"
+    same = "" if r.get("ratio_to_replay") is None else f"{r['ratio_to_replay']:.3f}"
     lines.append(f"| {r['task']} | {r.get('robot', 'gripper')} | {r['variant']} | {r['env_steps_per_s']:,.0f} | {ratio} | "
-                 f"{share} | {r['compile_s']:.0f} |")
+                 f"{same} | {share} | {r['compile_s']:.0f} |")
   return "\n".join(lines) + "\n"
 
 
