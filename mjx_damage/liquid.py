@@ -299,7 +299,7 @@ def _sums(terms: tuple) -> tuple:
   [envs, P, K] arrays between them and read them back (for all particle pairs at
   32768 envs × 128 particles, 2 GB an array: the pair pass was 2/3 of the liquid's
   time); one reduction with several outputs needs no such array. Measured by
-  ``benchmarks/liquid_speed.py`` (results/liquid_speed_gpu_h200.md): summing the
+  ``benchmarks/liquid_speed.py`` (results/liquid_speed_gpu.md): summing the
   stacked terms instead is 2.5× slower on a GPU, and slower on XLA:CPU too.
   """
   zeros = tuple(jnp.zeros((), t.dtype) for t in terms)
