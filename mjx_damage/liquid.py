@@ -296,11 +296,13 @@ def _sums(terms: tuple) -> tuple:
 
   The terms are elementwise expressions sharing subexpressions (squared distances,
   normals). As separate ``jnp.sum`` calls XLA:GPU stored the shared parts as
-  [envs, P, K] arrays between them and read them back (for all particle pairs at
-  32768 envs × 128 particles, 2 GB an array: the pair pass was 2/3 of the liquid's
-  time); one reduction with several outputs needs no such array. Measured by
-  ``benchmarks/liquid_speed.py`` (results/liquid_speed_gpu.md): summing the
-  stacked terms instead is 2.5× slower on a GPU, and slower on XLA:CPU too.
+  [envs, P, K] arrays between them and read them back: for all particle pairs at
+  32768 envs × 128 particles, five 2 GB arrays per substep, and the pair pass was 2/3
+  of the liquid's time. With one reduction of several outputs it stores only the
+  shared weight (one f32 and one bool array for the push, one f32 for the damping:
+  its optimised HLO, ``liquid_speed.py --hlo-dir``). Measured by
+  ``benchmarks/liquid_speed.py`` (results/liquid_speed_gpu.md): summing the stacked
+  terms instead is 2.5× slower on a GPU, and slower on XLA:CPU too.
   """
   zeros = tuple(jnp.zeros((), t.dtype) for t in terms)
   return tuple(jax.lax.reduce(terms, zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (1,)))
@@ -406,8 +408,10 @@ def _geom_pass(lm: LiquidModel, d, m, p: jax.Array, last: bool):
   (φ after the push f32[P], its normal as three f32[P], its column i32[P], the wet-link
   words u32[P] each) over every column but the world's planes (which act after the
   pass, see :func:`advance`); otherwise None. Each type group is one variadic
-  reduction: the per-(particle, geom) distances and normals are computed inside its
-  loop and never stored, which on a GPU is what the pass's time is.
+  reduction over its columns, so the dense pass's [P, G] distance and normal tables
+  and its separate argmin, min, gather and per-link passes are gone (XLA:GPU still
+  stores the pushes' [P, Gt] terms once per pass). Unrolling over the geoms instead
+  (all on [P] vectors) was measured slower on an H100 and on XLA:CPU.
   """
   world = set(lm.world_planes)
   step, closest, offset = None, None, 0
@@ -499,7 +503,7 @@ def advance(m, binding, d, ds, dt):
     for lift in lifts:
       p = p + lift
     for k, phi_k, nk in planes:  # merged into the closest-geom record, ties to the lower column as argmin
-      key = (phi_k, nk[0] + 0.0 * phi_k, nk[1] + 0.0 * phi_k, nk[2] + 0.0 * phi_k, jnp.full_like(closest[4], k),
+      key = (phi_k, *(jnp.broadcast_to(c, phi_k.shape) for c in nk), jnp.full_like(closest[4], k),
              tuple(w[:, 0] for w in _wet_bits(lm, phi_k[:, None], np.array([k]))))
       closest = _merge_closest(closest, key)
   v = (p - p0) / dt
