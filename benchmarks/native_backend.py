@@ -59,13 +59,8 @@ RESULTS = os.path.join(os.path.dirname(__file__), "results")
 
 
 def native_tasks() -> list[str]:
-  """Registered tasks without heat sources or liquid (what the native backend runs)."""
-  out = []
-  for name in tasks.names():
-    b = tasks.make(name).binding
-    if b.thermal is None and b.liquid is None:
-      out.append(name)
-  return out
+  """Registered tasks the native backend runs (all but those with heat sources)."""
+  return [name for name in tasks.names() if tasks.native.supports(tasks.make(name))]
 
 
 def throughput(task: str, envs: int, steps: int, repeats: int, threads: int) -> dict:
@@ -238,7 +233,9 @@ def markdown(res: dict) -> str:
     lines += [
         f"## Scripted-policy separation, {sep[0]['episodes']} episodes per policy and backend (seed {res['seed']})",
         "",
-        f"Command: `{res['separation_command']}` ({res['separation_date']})",
+        *(f"Command: `{r['command']}` ({r['date']}{'; rows of ' + ', '.join(r['tasks']) if r.get('tasks') else ''})  "
+          for r in res.get("separation_runs") or [{"command": res["separation_command"],
+                                                    "date": res["separation_date"]}]),
         "",
         f"Completion (C) / safe completion (SC) in %; tolerance {res['tolerance']:g} points.",
         "",
@@ -255,7 +252,7 @@ def markdown(res: dict) -> str:
           f"| {'yes' if r['within_tolerance'] else 'NO'} |")
     lines.append("")
   if res.get("not_native"):
-    lines += [f"Not run on the native backend (heat sources or liquid): {', '.join(res['not_native'])}.", ""]
+    lines += [f"Not run on the native backend (heat sources): {', '.join(res['not_native'])}.", ""]
   return "\n".join(lines)
 
 
@@ -291,6 +288,14 @@ def main(argv=None) -> int:
       p.error(f"{name}: must be >= 1, got {v}")
   if not args.ref_max_s > 0:  # NaN too
     p.error(f"--ref-max-s: must be > 0 s, got {args.ref_max_s}")
+  if not args.skip_separation:  # checked before anything runs
+    runnable = native_tasks()
+    names = [n for n in args.tasks.split(",") if n] or runnable
+    for n in names:
+      if n not in tasks.names():
+        p.error(f"--tasks: unknown task {n!r}")
+      if n not in runnable:
+        p.error(f"--tasks: {n} has heat sources, which the native backend does not run")
   _, desc = device_info()
   command = "python benchmarks/native_backend.py " + " ".join(sys.argv[1:] if argv is None else argv)
   stem = args.out or os.path.join(RESULTS, f"native_backend_{jax.default_backend()}")
@@ -313,11 +318,21 @@ def main(argv=None) -> int:
                          args.ref_max_s)
     res.update(boxes_command=command, boxes_date=date)
   if not args.skip_separation:
-    runnable = native_tasks()
-    names = [n for n in args.tasks.split(",") if n] or runnable
+    rows = separation(names, args.episodes, args.envs, args.threads, args.seed, args.tolerance)
+    old = res.get("separation") or []
+    same = (old and res.get("seed") == args.seed and res.get("tolerance") == args.tolerance
+            and old[0]["episodes"] == args.episodes)
+    runs = res.get("separation_runs") or ([{"command": res["separation_command"], "date": res["separation_date"]}]
+                                          if old and "separation_command" in res else [])
+    if same and args.tasks:  # a subset: its rows replace those tasks' rows, the others are kept
+      kept = [r for r in old if r["task"] not in names]
+      rows = sorted(kept + rows, key=lambda r: (tasks.names().index(r["task"]), r["policy"]))
+      runs = runs + [{"command": command, "date": date, "tasks": names}]
+    else:
+      runs = [{"command": command, "date": date}]
     res["not_native"] = [n for n in tasks.names() if n not in runnable]
-    res["separation"] = separation([n for n in names if n in runnable], args.episodes, args.envs, args.threads,
-                                   args.seed, args.tolerance)
+    res["separation"] = rows
+    res["separation_runs"] = runs
     res.update(seed=args.seed, tolerance=args.tolerance, separation_command=command, separation_date=date)
   write_json(stem + ".json", res, indent=1)
   write_text(stem + ".md", markdown(res))

@@ -35,10 +35,15 @@ behind the state; other derived fields keep their reset values. The native
 state is rounded to float32 at every control step, where the State stores it.
 
 Coupling: damage, health and peak loads feed nothing physical, so evaluating
-them after the substeps are stepped loses nothing. Temperature and liquid are
-evaluated from MJX contacts and geom poses at every substep; this backend has
-no such per-substep state, so scenes with heat sources or liquid are refused
-(``ValueError``) rather than silently run without them.
+them after the substeps are stepped loses nothing. The liquid is one-way coupled
+too (particles never push bodies): for a scene with liquid the rollout also
+records every substep's geom poses and body velocities (``geom_xpos``,
+``geom_xmat``, ``cvel``, ``subtree_com``: what :func:`mjx_damage.liquid.advance`
+reads, computed by ``mj_step`` before it integrates, as MJX's substep sees
+them), and ``finish_fn`` advances the particles substep by substep over them,
+each substep's exposure feeding that substep's damage. The temperature model
+reads MJX's contact list, which the batch does not record: scenes with heat
+sources are refused (``ValueError``) rather than run without it.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ import mujoco.batch
 import numpy as np
 from brax.envs.base import Wrapper
 
+from mjx_damage import liquid as Lq
 from mjx_damage import physics
 from mjx_damage.backends import native_batch as sensors
 
@@ -63,6 +69,8 @@ STATE_FIELDS = ("time", "qpos", "qvel", "act", "qacc_warmstart", "ctrl", "qfrc_a
 DERIVED_FIELDS = ("qacc", "xpos", "xquat", "xmat", "xipos", "ximat", "geom_xpos", "geom_xmat", "site_xpos",
                   "site_xmat", "subtree_com", "cvel", "actuator_force", "qfrc_actuator")
 DEFAULT_SLOTS = 16
+# recorded at every substep for the liquid (fields of the substep's forward pass, as MJX's substep reads them)
+LIQUID_FIELDS = ("geom_xpos", "geom_xmat", "cvel", "subtree_com")
 
 
 def _replace_physics(env, physics_step):
@@ -113,11 +121,10 @@ def sensor_model(env, spec: mujoco.MjSpec, slots: int = DEFAULT_SLOTS):
 
 
 def refusal(binding) -> Optional[str]:
-  """Why this backend cannot run a scene with this binding (heat sources or liquid), or None."""
-  if binding.thermal is None and binding.liquid is None:
+  """Why this backend cannot run a scene with this binding (heat sources), or None."""
+  if binding.thermal is None:
     return None
-  return ("backend: native has no temperature or liquid model (this scene has "
-          f"{'heat sources' if binding.thermal is not None else 'liquid'}); use backend mjx")
+  return "backend: native has no temperature model (this scene has heat sources); use backend mjx"
 
 
 class NativeBatchEnv:
@@ -158,6 +165,8 @@ class NativeBatchEnv:
     self._record = None
     dt = float(inner.mj_model.opt.timestep)
     layout = self.layout
+    self._recorded = ("sensordata",) + (LIQUID_FIELDS if binding.liquid is not None else ())
+    mjx_model = inner.sys
 
     def pre(state, action):
       box = []
@@ -169,17 +178,33 @@ class NativeBatchEnv:
       _replace_physics(env, capture).step(state, action)
       return box[0]
 
-    def damage(ds, sensordata):
-      """ds after the substeps whose sensordata f32[S, nsensordata] was recorded."""
-      # no temperature or liquid here (refused above): both stay as they are over the step
-      signals = jax.vmap(lambda sd: sensors.link_signals(layout, sd, ds.temperature, ds.exposure))(sensordata)
-      ds = physics.apply_recorded_substeps(physics.begin_step(ds), signals, dt)
+    def liquid(d, ds, substeps):
+      """ds with the particles advanced over the recorded substeps, and the exposure f32[S, L] of each."""
+      def one(ds, rec):
+        view = d.replace(**{k: rec[k].reshape(getattr(d, k).shape).astype(getattr(d, k).dtype)
+                            for k in LIQUID_FIELDS})
+        ds = Lq.advance(mjx_model, binding, view, ds, dt)
+        return ds, ds.exposure
+
+      return jax.lax.scan(one, ds, {k: substeps[k] for k in LIQUID_FIELDS})
+
+    def damage(d, ds, substeps):
+      """ds after the substeps recorded in ``substeps`` (sensordata f32[S, nsensordata], liquid fields)."""
+      sensordata = substeps["sensordata"]
+      ds = physics.begin_step(ds)
+      if binding.liquid is None:
+        exposure = jnp.broadcast_to(ds.exposure, (sensordata.shape[0],) + ds.exposure.shape)
+      else:
+        ds, exposure = liquid(d, ds, substeps)
+      # no temperature here (refused above): it stays as it is over the step
+      signals = jax.vmap(lambda sd, e: sensors.link_signals(layout, sd, ds.temperature, e))(sensordata, exposure)
+      ds = physics.apply_recorded_substeps(ds, signals, dt)
       return ds.replace(link_vel=sensors.link_velocity(layout, sensordata[-1]))
 
-    def post(state, action, fields, sensordata):
+    def post(state, action, fields, substeps):
       def native(d, ds, ctrl):
         new = {k: v.reshape(getattr(d, k).shape).astype(getattr(d, k).dtype) for k, v in fields.items()}
-        return d.replace(ctrl=ctrl, **new), damage(ds, sensordata)
+        return d.replace(ctrl=ctrl, **new), damage(d, ds, substeps)
 
       return _replace_physics(env, native).step(state, action)
 
@@ -197,14 +222,15 @@ class NativeBatchEnv:
   def step(self, state, action):
     """One control step of all B environments: native physics, the env's own step around it."""
     action = self._check_batch(action, "action")
-    fields, sensordata = self.simulate(state, self._controls(state, action))
-    return self._finish(state, action, fields, sensordata)
+    fields, substeps = self.simulate(state, self._controls(state, action))
+    return self._finish(state, action, fields, substeps)
 
   def simulate(self, state, ctrl):
     """The native part of a step: load the State's simulation state, run ``n_substeps`` with ``ctrl`` f32[B, nu].
 
     Returns (fields: the new ``mjx.Data`` field values, numpy f32[B, ...] by name;
-    sensordata f32[B, n_substeps, nsensordata] of every substep) for ``finish_fn``.
+    substeps: what every substep recorded, numpy f32[B, n_substeps, ...] by name — ``sensordata``,
+    and with liquid :data:`LIQUID_FIELDS`) for ``finish_fn``.
     """
     d = state.pipeline_state
     for name, row in self._rows.items():
@@ -212,12 +238,12 @@ class NativeBatchEnv:
         row[...] = np.asarray(ctrl)
       elif row.size:
         row[...] = np.asarray(getattr(d, name)).reshape(row.shape)
-    self._record = self.batch.rollout(self.n_substeps, record=("sensordata",), out=self._record)
+    self._record = self.batch.rollout(self.n_substeps, record=self._recorded, out=self._record)
     fields = {n: np.array(r, np.float32) for n, r in self._rows.items() if r.size and n != "ctrl"}
     fields.update({n: np.asarray(o, np.float32) for n, o in self._out.items() if o.size})
     if self.base_nsensordata:
       fields["sensordata"] = self._record["sensordata"][:, -1, : self.base_nsensordata].astype(np.float32)
-    return fields, self._record["sensordata"].astype(np.float32)
+    return fields, {k: self._record[k].astype(np.float32) for k in self._recorded}
 
   def dropped_contacts(self) -> np.ndarray:
     """Contacts the last step's sensors could not keep, per env and substep: i32[B, S, L]."""

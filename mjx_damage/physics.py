@@ -104,7 +104,7 @@ def apply_recorded_substeps(ds: DamageState, signals: LinkSignals, dt) -> Damage
   damage models run once, vectorised over the substeps, and only the health integration, the
   per-step damage sum and the peak loads go substep by substep, in ``apply_signals``'s order, so the
   result equals S ``apply_signals`` calls. The signals must not depend on the health they change
-  (true of contact forces, accelerations and a temperature or exposure held over the step).
+  (true of contact forces, accelerations, temperatures and liquid exposures).
   """
   ev = jax.vmap(evaluate, in_axes=(0, None))(signals, ds.params)  # rates f32[S, L] per model
   # unrolled: S is small and static, and XLA:CPU pays per loop iteration for each of these tiny ops

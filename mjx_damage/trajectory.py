@@ -164,8 +164,8 @@ class _NativePrograms:
       action = jax.vmap(lambda s, k, i: mjx.policy(s, jax.random.fold_in(k, t), i))(state, act_key, b)
       return action, env.controls_fn(state, action)
 
-    def advance(state, done, action, fields, sensordata):
-      nxt = env.finish_fn(state, action, fields, sensordata)
+    def advance(state, done, action, fields, substeps):
+      nxt = env.finish_fn(state, action, fields, substeps)
       keep = lambda new, old: jnp.where(jnp.reshape(done > 0, done.shape + (1,) * (new.ndim - 1)), old, new)
       nxt = jax.tree.map(keep, nxt, state)
       rec = jax.vmap(_record)(nxt, done)
@@ -176,8 +176,8 @@ class _NativePrograms:
 
   def step(self, state, act_keys, done, index, t):
     action, ctrl = self.decide(state, act_keys, index, t)
-    fields, sensordata = self.env.simulate(state, ctrl)
-    return self.advance(state, done, action, fields, sensordata)
+    fields, substeps = self.env.simulate(state, ctrl)
+    return self.advance(state, done, action, fields, substeps)
 
 
 _PROGRAMS: "collections.OrderedDict" = collections.OrderedDict()

@@ -46,11 +46,20 @@ def scene_spec(env) -> mujoco.MjSpec:
 
 def supports(env) -> bool:
   """Whether the native backend runs ``env`` (wrapped or bare): a task-suite, drop or K-box scene
-  without heat sources or liquid (:class:`NativeBatchEnv` refuses those)."""
+  without heat sources (:class:`NativeBatchEnv` refuses those)."""
   task = getattr(env, "unwrapped", env)
   binding = getattr(task, "damage_binding", None)
   return (isinstance(task, (Task, drop.DropEnv, bench_table.TableEnv)) and binding is not None
           and refusal(binding) is None)
+
+
+def faster(env) -> bool:
+  """Whether the native backend is the faster one for ``env`` on a CPU: it runs it (:func:`supports`) and
+  the scene has no liquid. With liquid the particles, advanced in JAX over the recorded substeps,
+  take most of the step on either backend: pour_water at 64 envs on 2 cores ran 1,037 native vs 975
+  MJX env-steps/s, no reason to change what ``auto`` gives."""
+  task = getattr(env, "unwrapped", env)
+  return supports(env) and task.damage_binding.liquid is None
 
 
 def wrap(env, num_envs: int, nthread: int = 0, slots: int = DEFAULT_SLOTS) -> NativeBatchEnv:

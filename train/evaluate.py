@@ -277,8 +277,8 @@ class NativeEvaluator:
       return (state, jnp.zeros(state.done.shape, state.done.dtype), jnp.zeros(state.done.shape, jnp.float32),
               act_key, *decide(params, state, act_key, 0))
 
-    def advance(params, state, done, ret, action, fields, sensordata, act_key, t):
-      nxt = env.finish_fn(state, action, fields, sensordata)
+    def advance(params, state, done, ret, action, fields, substeps, act_key, t):
+      nxt = env.finish_fn(state, action, fields, substeps)
       ret = ret + jnp.where(done > 0, 0.0, nxt.info.get("task_reward", nxt.reward))
       keep = lambda a, b: jnp.where(jnp.reshape(done > 0, done.shape + (1,) * (a.ndim - 1)), b, a)
       state = jax.tree.map(keep, nxt, state)
@@ -305,8 +305,8 @@ class NativeEvaluator:
       idx = np.minimum(np.arange(lo, lo + b), e - 1)
       state, done, ret, act_key, action, ctrl = self._start(params, keys[idx], fragility[idx])
       for t in range(self.episode_length):
-        fields, sensordata = self.env.simulate(state, ctrl)
-        state, done, ret, action, ctrl = self._advance(params, state, done, ret, action, fields, sensordata,
+        fields, substeps = self.env.simulate(state, ctrl)
+        state, done, ret, action, ctrl = self._advance(params, state, done, ret, action, fields, substeps,
                                                        act_key, t)
       out = dict(self._summary(state), task_return=ret)
       parts.append(jax.tree.map(lambda x: np.asarray(x)[: min(b, e - lo)], out))
