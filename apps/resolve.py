@@ -69,15 +69,15 @@ def check_backend(name) -> str:
 def pick_backend(backend: str, env, num_devices: int = 1) -> str:
   """``mjx`` or ``native`` for ``--backend``: ``auto`` is whichever is faster for ``env``.
 
-  That is native on a CPU run over one device whose scene the native backend runs without liquid
-  (about 10x the MJX-JAX env-steps/s on 2 cores: benchmarks/results/native_backend_cpu.md), else mjx
-  (accelerators, several devices, heat sources; liquid, where the two run at the same speed:
-  :func:`tasks.native.faster`). The two agree on completion and safe completion; health and cost
-  can differ (README, "Native batched backend")."""
+  That is native on a CPU run over one device whose scene the native backend runs (about 10x the
+  MJX-JAX env-steps/s on 2 cores, 1.3x with liquid, whose particles run in JAX on either:
+  benchmarks/results/native_backend_cpu.md, native_backend_cpu_pour_water.md), else mjx
+  (accelerators, several devices, heat sources). The two agree on completion and safe completion;
+  health and cost can differ (README, "Native batched backend")."""
   if check_backend(backend) != "auto":
     return backend
   cpu_only = jax.default_backend() == "cpu"
-  return "native" if cpu_only and num_devices == 1 and tasks.native.faster(env) else "mjx"
+  return "native" if cpu_only and num_devices == 1 and tasks.native.supports(env) else "mjx"
 
 
 def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
@@ -97,7 +97,7 @@ def add_backend_argument(ap, scope: str = "", default: str = "mjx") -> None:
   ap.add_argument("--backend", default=default,
                   help=f"physics (default {default}): mjx (compiled MJX-JAX, batched on any device), native "
                        "(MuJoCo on C threads, CPU; scenes without heat sources) or auto (native on a one-device CPU "
-                       "run where the scene allows and has no liquid, else mjx)" + (f"; {scope}" if scope else ""))
+                       "run where the scene allows, else mjx)" + (f"; {scope}" if scope else ""))
 
 
 def episode_length_of(env, task: Optional[str] = None) -> int:

@@ -53,15 +53,6 @@ def supports(env) -> bool:
           and refusal(binding) is None)
 
 
-def faster(env) -> bool:
-  """Whether the native backend is the faster one for ``env`` on a CPU: it runs it (:func:`supports`) and
-  the scene has no liquid. With liquid the particles, advanced in JAX over the recorded substeps,
-  take most of the step on either backend: pour_water at 64 envs on 2 cores ran 1,037 native vs 975
-  MJX env-steps/s, no reason to change what ``auto`` gives."""
-  task = getattr(env, "unwrapped", env)
-  return supports(env) and task.damage_binding.liquid is None
-
-
 def wrap(env, num_envs: int, nthread: int = 0, slots: int = DEFAULT_SLOTS) -> NativeBatchEnv:
   """``num_envs`` native copies of an env :func:`tasks.make` (or ``DamageWrapper(DropEnv())``) built."""
   return NativeBatchEnv(env, scene_spec(env), num_envs, nthread=nthread, slots=slots)
