@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import sys
 import time
 
@@ -297,7 +298,7 @@ def main(argv=None) -> int:
       if n not in runnable:
         p.error(f"--tasks: {n} has heat sources, which the native backend does not run")
   _, desc = device_info()
-  command = "python benchmarks/native_backend.py " + " ".join(sys.argv[1:] if argv is None else argv)
+  command = "python benchmarks/native_backend.py " + shlex.join(sys.argv[1:] if argv is None else argv)
   stem = args.out or os.path.join(RESULTS, f"native_backend_{jax.default_backend()}")
   res = {}
   if os.path.exists(stem + ".json"):
