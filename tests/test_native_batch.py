@@ -35,23 +35,34 @@ def _reference(env, state0, b):
   """Env ``b`` through :func:`mjx_damage.native.substep` (numpy contact readout), its state rounded
   to float32 at every control step as the batched backend's State stores it."""
   inner = env.unwrapped
-  m, binding = inner.mj_model, inner.damage_binding
-  d = mujoco.MjData(m)
-  p0 = state0.pipeline_state
-  for f in ("qpos", "qvel", "ctrl", "qacc_warmstart"):
-    getattr(d, f)[:] = np.asarray(getattr(p0, f)[b])
-  d.time = float(p0.time[b])
-  ds = jax.tree.map(lambda x: x[b], state0.info["damage_state"])
+  d = mujoco.MjData(inner.mj_model)
+  ds = _load(d, state0, b, ("qpos", "qvel", "ctrl", "qacc_warmstart"))
   out = []
   for _ in range(STEPS):
-    ds = physics.begin_step(ds)
-    for _ in range(inner.n_substeps):
-      ds = native.substep(binding, m, d, ds)
-    for f in ("qpos", "qvel", "qacc_warmstart"):
-      getattr(d, f)[:] = getattr(d, f).astype(np.float32)
-    d.time = float(np.float32(d.time))
+    ds = _reference_step(inner, d, ds)
     out.append(ds)
   return out
+
+
+def _load(d, state, b, fields):
+  """Env ``b`` of the batched ``state`` into the MjData ``d`` (``fields`` and time); its damage state."""
+  p0 = state.pipeline_state
+  for f in fields:
+    getattr(d, f)[:] = np.asarray(getattr(p0, f)[b]).reshape(getattr(d, f).shape)
+  d.time = float(p0.time[b])
+  return jax.tree.map(lambda x: x[b], state.info["damage_state"])
+
+
+def _reference_step(inner, d, ds):
+  """One control step of ``d`` through :func:`mjx_damage.native.substep`, then rounded to float32 as the
+  batched backend's State stores it; the new damage state."""
+  ds = physics.begin_step(ds)
+  for _ in range(inner.n_substeps):
+    ds = native.substep(inner.damage_binding, inner.mj_model, d, ds)
+  for f in ("qpos", "qvel", "qacc_warmstart"):
+    getattr(d, f)[:] = getattr(d, f).astype(np.float32)
+  d.time = float(np.float32(d.time))
+  return ds
 
 
 def test_batched_damage_matches_single_env_native_path(drop):
@@ -204,11 +215,7 @@ def test_batched_liquid_matches_single_env_native_path():
   policy = jax.jit(jax.vmap(tasks.scripted_policy(env, "unsafe")))
   s = nenv.reset(jax.random.split(jax.random.PRNGKey(5), 2))
   d = mujoco.MjData(m)
-  p0 = s.pipeline_state
-  for f in ("qpos", "qvel", "qacc_warmstart", "mocap_pos", "mocap_quat"):
-    getattr(d, f)[:] = np.asarray(getattr(p0, f)[0]).reshape(getattr(d, f).shape)
-  d.time = float(p0.time[0])
-  ds = jax.tree.map(lambda x: x[0], s.info["damage_state"])
+  ds = _load(d, s, 0, ("qpos", "qvel", "qacc_warmstart", "mocap_pos", "mocap_quat"))
   start = np.asarray(ds.liquid.pos)
   P = binding.liquid.num_particles
   for t in range(30):
@@ -216,12 +223,7 @@ def test_batched_liquid_matches_single_env_native_path():
     ctrl = nenv._controls(s, a)
     s = nenv._finish(s, a, *nenv.simulate(s, ctrl))
     d.ctrl[:] = np.asarray(ctrl[0])
-    ds = physics.begin_step(ds)
-    for _ in range(inner.n_substeps):
-      ds = native.substep(binding, m, d, ds)
-    for f in ("qpos", "qvel", "qacc_warmstart"):
-      getattr(d, f)[:] = getattr(d, f).astype(np.float32)
-    d.time = float(np.float32(d.time))
+    ds = _reference_step(inner, d, ds)
     got = s.info["damage_state"]
     if t < 2:  # before the settling pile's chaos separates the float paths (2e-5 m at step 2, cm by 20)
       np.testing.assert_allclose(np.asarray(got.liquid.pos[0]), np.asarray(ds.liquid.pos), atol=1e-6)
