@@ -174,6 +174,13 @@ def separation(names: list[str], episodes: int, envs: int, threads: int, seed: i
   return rows
 
 
+def separation_runs(res: dict) -> list[dict]:
+  """The commands behind ``res``'s separation rows (files written before ``separation_runs``: one)."""
+  if "separation_runs" in res:
+    return res["separation_runs"]
+  return [{"command": res["separation_command"], "date": res["separation_date"]}] if "separation_command" in res else []
+
+
 def markdown(res: dict) -> str:
   lines = ["# Native batched backend vs MJX-JAX (CPU)", "", f"Device: {res['device']}.", ""]
   tp = res.get("throughput")
@@ -235,8 +242,7 @@ def markdown(res: dict) -> str:
         f"## Scripted-policy separation, {sep[0]['episodes']} episodes per policy and backend (seed {res['seed']})",
         "",
         *(f"Command: `{r['command']}` ({r['date']}{'; rows of ' + ', '.join(r['tasks']) if r.get('tasks') else ''})  "
-          for r in res.get("separation_runs") or [{"command": res["separation_command"],
-                                                    "date": res["separation_date"]}]),
+          for r in separation_runs(res)),
         "",
         f"Completion (C) / safe completion (SC) in %; tolerance {res['tolerance']:g} points.",
         "",
@@ -321,20 +327,17 @@ def main(argv=None) -> int:
   if not args.skip_separation:
     rows = separation(names, args.episodes, args.envs, args.threads, args.seed, args.tolerance)
     old = res.get("separation") or []
-    same = (old and res.get("seed") == args.seed and res.get("tolerance") == args.tolerance
-            and old[0]["episodes"] == args.episodes)
-    runs = res.get("separation_runs") or ([{"command": res["separation_command"], "date": res["separation_date"]}]
-                                          if old and "separation_command" in res else [])
-    if same and args.tasks:  # a subset: its rows replace those tasks' rows, the others are kept
+    if args.tasks and old and (res.get("seed"), res.get("tolerance"), old[0]["episodes"]) == (
+        args.seed, args.tolerance, args.episodes):  # a subset: its rows replace those tasks' rows, the others stay
       kept = [r for r in old if r["task"] not in names]
       rows = sorted(kept + rows, key=lambda r: (tasks.names().index(r["task"]), r["policy"]))
-      runs = runs + [{"command": command, "date": date, "tasks": names}]
+      runs = separation_runs(res) + [{"command": command, "date": date, "tasks": names}]
     else:
       runs = [{"command": command, "date": date}]
-    res["not_native"] = [n for n in tasks.names() if n not in runnable]
-    res["separation"] = rows
-    res["separation_runs"] = runs
-    res.update(seed=args.seed, tolerance=args.tolerance, separation_command=command, separation_date=date)
+    for legacy in ("separation_command", "separation_date"):  # files before separation_runs
+      res.pop(legacy, None)
+    res.update(separation=rows, separation_runs=runs, not_native=[n for n in tasks.names() if n not in runnable],
+               seed=args.seed, tolerance=args.tolerance)
   write_json(stem + ".json", res, indent=1)
   write_text(stem + ".md", markdown(res))
   print(f"outputs: {stem}.json, {stem}.md")

@@ -104,6 +104,23 @@ def _physics_override(task, variant: str):
   return lambda d, ds, ctrl: physics.step(sys_, b, d.replace(ctrl=ctrl), ds, n)
 
 
+def _policy_rollout(stepper, policy, carry, steps: int, record=lambda s: None):
+  """``steps`` steps of ``vmap(policy)`` + ``vmap(stepper.step)`` from ``carry`` = (state, key) in one scan:
+  (final carry, ``record(state)`` after each step, stacked). The ``task`` variants time it; ``raw_replay``
+  records the controls it applied."""
+  import jax
+
+  envs = carry[0].obs.shape[0]
+
+  def body(c, _):
+    s, k = c
+    k, kp = jax.random.split(k)
+    s = jax.vmap(stepper.step)(s, jax.vmap(policy)(s, jax.random.split(kp, envs)))
+    return (s, k), record(s)
+
+  return jax.lax.scan(body, carry, None, length=steps)
+
+
 def _task_controls(env, policy, state, steps: int):
   """The controls (``d.ctrl`` after each step, f32[steps, envs, nu]) of ``steps`` task steps from ``state``.
 
@@ -111,16 +128,9 @@ def _task_controls(env, policy, state, steps: int):
   physics that variant's policy drove."""
   import jax
 
-  envs = state.obs.shape[0]
-
-  def body(c, _):
-    s, k = c
-    k, kp = jax.random.split(k)
-    a = jax.vmap(policy)(s, jax.random.split(kp, envs))
-    s = jax.vmap(env.step)(s, a)
-    return (s, k), s.pipeline_state.ctrl
-
-  return jax.jit(lambda s: jax.lax.scan(body, (s, jax.random.PRNGKey(1)), None, length=steps)[1])(state)
+  rollout = lambda s: _policy_rollout(env, policy, (s, jax.random.PRNGKey(1)), steps,  # noqa: E731
+                                      lambda s: s.pipeline_state.ctrl)[1]
+  return jax.jit(rollout)(state)
 
 
 def applicable(task, variant: str) -> bool:
@@ -182,12 +192,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
     carry = (state.pipeline_state, ctrls)
   else:
     def run(carry):
-      def body(c, _):
-        s, k = c
-        k, kp = jax.random.split(k)
-        a = jax.vmap(policy)(s, jax.random.split(kp, envs))
-        return (jax.vmap(stepper.step)(s, a), k), None
-      return jax.lax.scan(body, carry, None, length=steps)[0]
+      return _policy_rollout(stepper, policy, carry, steps)[0]
 
     carry = (state, jax.random.PRNGKey(1))
   hits = CACHE_HITS[0]

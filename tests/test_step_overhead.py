@@ -65,12 +65,7 @@ def test_raw_replay_steps_the_physics_the_task_step_did():
   ctrls = so._task_controls(env, policy, state, 3)
 
   def task_qpos(s):
-    def body(c, _):
-      s, k = c
-      k, kp = jax.random.split(k)
-      s = jax.vmap(env.step)(s, jax.vmap(policy)(s, jax.random.split(kp, 4)))
-      return (s, k), s.pipeline_state.qpos
-    return jax.lax.scan(body, (s, jax.random.PRNGKey(1)), None, length=3)[1]
+    return so._policy_rollout(env, policy, (s, jax.random.PRNGKey(1)), 3, lambda s: s.pipeline_state.qpos)[1]
 
   def replay_qpos(d):
     def body(d, c):
