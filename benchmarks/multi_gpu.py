@@ -33,6 +33,13 @@ or one device count per call (each call under a time limit), the second adding i
     python benchmarks/multi_gpu.py --task place_plate --devices 1 --repeats 2 --iterations 40 --results-dir /tmp/mg
     python benchmarks/multi_gpu.py --task place_plate --devices 2 --repeats 2 --iterations 40 --results-dir /tmp/mg --append
 
+Several processes on JAX's distributed runtime (``train.distributed``), e.g. one per GPU of a node,
+each with its own ``--process-id``; process 0 writes ``multi_gpu_<device>_2proc.*`` and its timer is
+the one recorded (another process's timer also waits for process 0's host-side preparation)::
+
+    for i in 0 1; do CUDA_VISIBLE_DEVICES=$i python benchmarks/multi_gpu.py --parts eval --devices 2 \
+        --coordinator 127.0.0.1:29500 --num-processes 2 --process-id $i & done; wait
+
 CPU plumbing check with 2 fake host devices (measures nothing about GPUs)::
 
     XLA_FLAGS=--xla_force_host_platform_device_count=2 python benchmarks/multi_gpu.py \\
@@ -56,6 +63,7 @@ sys.path.insert(0, ROOT)
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cache"))
 
 from mjx_damage import io, runtime  # noqa: E402
+from train import distributed  # noqa: E402
 
 CURVE_KEYS = ("eval/safe_completion", "eval/completion", "eval/episode_cost", "eval/task_return")
 
@@ -80,10 +88,21 @@ def parse(argv=None):
                  help="after the last repeat, time one iteration split into rollout and update (train(profile=True)): "
                       "where the scaling is lost")
   p.add_argument("--parts", default="eval,train", help="what to time: eval, train or both (comma-separated)")
+  p.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                 help="several processes on JAX's distributed runtime (train.distributed), e.g. one per GPU: start "
+                      "each with the same --coordinator and --num-processes and its own --process-id; device counts "
+                      "are then over all processes (each a multiple of --num-processes), process 0 writes "
+                      "multi_gpu_<device>_<N>proc.*")
+  p.add_argument("--num-processes", type=int, default=None)
+  p.add_argument("--process-id", type=int, default=None)
   p.add_argument("--append", action="store_true",
                  help="merge into an earlier results file: keep its other device counts, and the parts of these "
                       "device counts that this call does not time (each part records its own command)")
   args = p.parse_args(argv)
+  try:
+    args.setup = distributed.check(None, args.coordinator, args.num_processes, args.process_id)
+  except ValueError as e:
+    p.error(str(e))
   if args.repeats < 2:
     p.error("--repeats: at least 2 (the spread over repeats is reported)")
   if args.iterations < 3 or args.eval_points < 1:
@@ -101,12 +120,14 @@ def parse(argv=None):
   return args
 
 
-def device_counts(spec: str, available: int) -> list[int]:
+def device_counts(spec: str, available: int, processes: int = 1) -> list[int]:
   out = []
   for s in spec.split(","):
     n = available if s.strip() == "all" else int(s)
     if not 1 <= n <= available:
       raise SystemExit(f"--devices: {n} requested, {available} available")
+    if n % processes:
+      raise SystemExit(f"--devices: {n} cannot be split evenly over --num-processes {processes}")
     if n not in out:
       out.append(n)
   return out
@@ -164,7 +185,7 @@ def eval_runs(args, d: int, save=lambda part: None) -> dict:
   T = task_episode_length(env)
   policy = R.make_policy(args.policy, env)
   episodes = args.eval_episodes_per_device * d
-  ev = E.Evaluator(env, policy, T, jax.devices()[:d])
+  ev = E.Evaluator(env, policy, T, distributed.select_devices(d))
   keys = np.tile(np.asarray(E.episode_keys(0, episodes)), (len(args.fragility), 1))
   frag = np.repeat(np.asarray(args.fragility, np.float32), episodes)
   t0 = time.perf_counter()
@@ -182,6 +203,8 @@ def eval_runs(args, d: int, save=lambda part: None) -> dict:
 
 
 def write(base: str, payload: dict) -> None:
+  if not distributed.is_main():  # several processes: process 0 writes
+    return
   io.write_json(base + ".json", payload, indent=1)
   rows = payload["rows"]
   one = next((r for r in rows if r["devices"] == 1), None)
@@ -198,6 +221,8 @@ def write(base: str, payload: dict) -> None:
       r[k].get("command", r.get("command")) for r in rows for k in ("train", "eval") if k in r))
   lines = [f"# Scaling over devices: {payload['device']}", "",
            f"Command(s): {commands}", "", f"jax {payload['jax']}, {payload['date']}; task {payload['task']}; "
+           + (f"{payload['processes']} processes (JAX distributed runtime; each owns its share of the devices); "
+              if payload.get("processes", 1) > 1 else "") +
            f"rates are mean (min–max) over {payload['repeats']} repeats; speedup vs 1 device at the same per-device batch.",
            "", "| Devices | Train envs (global) | Train env-steps/s | Speedup | Eval episodes | Eval env-steps/s | Speedup |",
            "|---:|---:|---:|---:|---:|---:|---:|"]
@@ -250,13 +275,15 @@ def plot(path: str, rows: list) -> None:
 
 def main(argv=None) -> int:
   args = parse(argv)
+  distributed.initialize(args.setup, "multi_gpu.py")
   import jax
 
   slug, device = runtime.device_info()
-  counts = device_counts(args.devices, jax.local_device_count())
-  base = os.path.join(args.results_dir, f"multi_gpu_{slug}")
+  procs = jax.process_count()
+  counts = device_counts(args.devices, jax.device_count(), procs)
+  base = os.path.join(args.results_dir, f"multi_gpu_{slug}" + (f"_{procs}proc" if procs > 1 else ""))
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/multi_gpu.py"] + list(sys.argv[1:] if argv is None else argv))
-  payload = {"device": device, "jax": jax.__version__, "task": args.task, "repeats": args.repeats,
+  payload = {"device": device, "jax": jax.__version__, "task": args.task, "repeats": args.repeats, "processes": procs,
              "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
   earlier = {}
   if args.append and os.path.exists(base + ".json"):

@@ -333,3 +333,31 @@ def test_multi_gpu_keeps_the_finished_repeats_when_a_time_limit_ends_the_run(tmp
     mg.main(["--devices", "1", "--parts", "train", "--results-dir", str(tmp_path)])
   row, = json.load(open(tmp_path / "multi_gpu_cpu.json"))["rows"]
   assert row["devices"] == 1 and row["train"]["env_steps_per_s"]["runs"] == [123.0]
+
+
+def test_multi_gpu_benchmark_runs_as_two_processes(tmp_path):
+  """benchmarks/multi_gpu.py over JAX's distributed runtime, one device per process: process 0 writes
+  a ``_2proc`` file whose 2-device row timed the sweep over both processes' devices."""
+  port = _port()
+  argv = [sys.executable, "benchmarks/multi_gpu.py", "--task", TASK, "--parts", "eval", "--devices", "2",
+          "--eval-episodes-per-device", "4", "--fragility", "1,2",
+          "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--results-dir", str(tmp_path)]
+  procs = [subprocess.Popen(argv + ["--process-id", str(i)], cwd=ROOT, env=_env(1), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True) for i in range(2)]
+  outs = [p.communicate(timeout=600) for p in procs]
+  for p, (out, err) in zip(procs, outs):
+    assert p.returncode == 0, err[-3000:]
+  assert sorted(os.listdir(tmp_path)) == ["multi_gpu_cpu_2proc.json", "multi_gpu_cpu_2proc.md",
+                                          "multi_gpu_cpu_2proc_curves.png"]
+  res = json.load(open(tmp_path / "multi_gpu_cpu_2proc.json"))
+  assert res["processes"] == 2 and [r["devices"] for r in res["rows"]] == [2]
+  assert res["rows"][0]["eval"]["episodes"] == 2 * 4 * 2 and len(res["rows"][0]["eval"]["env_steps_per_s"]["runs"]) == 2
+  assert "2 processes" in (tmp_path / "multi_gpu_cpu_2proc.md").read_text()
+
+
+def test_multi_gpu_benchmark_refuses_device_counts_not_split_over_the_processes():
+  mg = load_benchmark("multi_gpu")
+  with pytest.raises(SystemExit, match="--devices: 3 cannot be split evenly over --num-processes 2"):
+    mg.device_counts("3", 4, 2)
+  with pytest.raises(SystemExit):
+    mg.parse(["--coordinator", "127.0.0.1:1234"])  # no --num-processes / --process-id: argparse's exit 2
