@@ -16,7 +16,8 @@ action giving the row's columns (docs/safe_rl.md, "Which policy is scored").
 Rows go to ``benchmarks/results/rl_brax_<task>_<device>.{json,md}`` (or
 ``--out STEM``), one per (damage weight, seed), each with its exact command;
 rows of other runs (weight, seed or settings) already in the file are kept, so one call per
-run builds one table. ``--budget-seconds`` stops a run at the first evaluation
+run builds one table; ``--merge A.json B.json ...`` (no training) combines the files of runs made by
+separate processes, e.g. several runs sharing one GPU. ``--budget-seconds`` stops a run at the first evaluation
 after that much training wall time (the policy of that evaluation is scored).
 
 GPU (one H100, ≤ 10 min per call; earlier runs of this recipe needed 15–23 M
@@ -265,7 +266,18 @@ def parse_args(argv=None):
                       "'{\"start\": \"pregrasp\"}'; rows record them")
   p.add_argument("--out-dir", default=RESULTS)
   p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
+  p.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                 help="train nothing: merge the rows of these results files (runs of one task made by "
+                      "separate processes, e.g. several on one GPU) into --out, or OUT_DIR/rl_brax_<task>_<device "
+                      "of the first file>")
   a = p.parse_args(argv)
+  if a.merge is not None:
+    a.merge_docs = [_load_results(path) for path in a.merge]
+    tasks_seen = sorted({d["task"] for d in a.merge_docs})
+    if len(tasks_seen) != 1:
+      raise ValueError(f"merge: files of one task only, got tasks {tasks_seen}")
+    a.task = tasks_seen[0]
+    return a
   tasks.task_class(a.task)  # ValueError listing the valid names, before anything compiles
   a.weights = _csv(a.damage_weights, float, "damage_weights")
   a.seed_list = _csv(a.seeds, int, "seeds")
@@ -297,8 +309,49 @@ def parse_args(argv=None):
   return a
 
 
+def _load_results(path: str) -> dict:
+  """A results file of this script, or ValueError naming ``merge``."""
+  try:
+    with open(path) as f:
+      doc = json.load(f)
+  except (OSError, json.JSONDecodeError) as e:
+    raise ValueError(f"merge: cannot read {path!r} ({e})") from None
+  if not isinstance(doc, dict) or "task" not in doc or not isinstance(doc.get("rows"), list):
+    raise ValueError(f"merge: {path!r} is not a results file of this script (no task / rows)")
+  return doc
+
+
+def _add_row(doc: dict, row: dict) -> None:
+  """``row`` into ``doc``: a rerun with the same key replaces its row; rows sorted for the table."""
+  doc["rows"] = [r for r in doc["rows"] if _key(r) != _key(row)] + [row]
+  doc["rows"].sort(key=lambda r: (r["damage_weight"], r.get("recipe", {}).get("init_log_std") is not None,
+                                  r["seed"], r["env_steps"]))
+
+
+def merge(docs: list[dict], stem: str) -> dict:
+  """The rows of ``docs`` (and of an existing ``stem``.json) in one table at ``stem``; later files win a
+  shared key. Device, recipe and settings of the header come from the last file."""
+  out = dict(docs[-1], rows=[], notes=[])
+  if os.path.exists(stem + ".json"):
+    old = _load_results(stem + ".json")
+    out["rows"], out["notes"] = old["rows"], old.get("notes", [])
+  for d in docs:
+    for row in d["rows"]:
+      _add_row(out, row)
+    out["notes"] += [n for n in d.get("notes", []) if n not in out["notes"]]
+  write_json(stem + ".json", out)
+  write_text(stem + ".md", render_md(out))
+  return out
+
+
 def main(argv=None) -> int:
   a = parse_args(argv)
+  if a.merge is not None:
+    slug = re.sub(r"[^a-z0-9]+", "_", a.merge_docs[0]["device"].lower()).strip("_")
+    stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{slug}")
+    merged = merge(a.merge_docs, stem)
+    print(f"wrote {stem}.json / .md ({len(merged['rows'])} rows)")
+    return 0
   command = "python benchmarks/rl_brax_ppo.py " + " ".join(
       shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
   cfg = dict(PLAYGROUND_PANDA_PICK_CUBE, num_timesteps=a.num_timesteps, num_envs=a.num_envs,
@@ -321,9 +374,7 @@ def main(argv=None) -> int:
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "
             f"{row['env_steps']} env-steps, {row['train_wall_s']} s", flush=True)
-      doc["rows"] = [r for r in doc["rows"] if _key(r) != _key(row)] + [row]
-      doc["rows"].sort(key=lambda r: (r["damage_weight"], r.get("recipe", {}).get("init_log_std") is not None,
-                                      r["seed"], r["env_steps"]))
+      _add_row(doc, row)
       write_json(stem + ".json", doc)  # after every run: a timeout keeps the finished ones
       write_text(stem + ".md", render_md(doc))
   print(f"wrote {stem}.json / .md")

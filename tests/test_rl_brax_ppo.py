@@ -84,3 +84,42 @@ def test_rows_say_which_action_scored_them():
   assert "| task reward only | 0 | mode | 100.0 % | 50.0 % |" in md
   old = {k: x for k, x in row.items() if k not in ("eval_actions", "by_action")}  # before the flag: the mode
   assert "| task reward only | 0 |" in R.render_md(dict(doc, rows=[old])) and "by action" not in R.render_md(dict(doc, rows=[old]))
+
+
+def _row(w, seed, safe):
+  return {"reward": f"w {w}", "damage_weight": w, "seed": seed, "env_steps": 10, "train_wall_s": 1.0,
+          "stopped_by_budget": False, "completion": 1.0, "safe_completion": safe, "avg_env_health": 99.0,
+          "episode_cost": 1.0, "eval_episodes": 8, "command": "c", "recipe": {}, "task_settings": {}}
+
+
+def test_merge_combines_the_files_of_separate_processes_into_one_table(tmp_path):
+  import json
+  paths = []
+  for i, rows in enumerate([[_row(0.0, 0, 0.1)], [_row(2.0, 0, 0.9), _row(2.0, 1, 0.8)], [_row(0.0, 0, 0.2)]]):
+    paths.append(str(tmp_path / f"p{i}.json"))
+    with open(paths[-1], "w") as f:
+      json.dump({"task": "shelve_item", "task_settings": {}, "device": "NVIDIA H200", "recipe": {}, "rows": rows}, f)
+  assert R.main(["--merge", *paths, "--out-dir", str(tmp_path)]) == 0
+  with open(tmp_path / "rl_brax_shelve_item_nvidia_h200.json") as f:
+    merged = json.load(f)
+  # one row per (weight, seed): the later file's rerun of w 0 seed 0 replaces the earlier one
+  assert [(r["damage_weight"], r["seed"], r["safe_completion"]) for r in merged["rows"]] == [
+      (0.0, 0, 0.2), (2.0, 0, 0.9), (2.0, 1, 0.8)]
+  assert (tmp_path / "rl_brax_shelve_item_nvidia_h200.md").read_text().count("| w 2.0 |") == 2
+
+
+def test_merge_refuses_unreadable_files_and_mixed_tasks(tmp_path):
+  import json
+  bad = tmp_path / "bad.json"
+  bad.write_text("{not json")
+  with pytest.raises(ValueError, match="merge: cannot read"):
+    R.parse_args(["--merge", str(bad)])
+  with pytest.raises(ValueError, match="merge: cannot read"):
+    R.parse_args(["--merge", str(tmp_path / "missing.json")])
+  paths = []
+  for task in ("place_plate", "pick_egg"):
+    paths.append(str(tmp_path / f"{task}.json"))
+    with open(paths[-1], "w") as f:
+      json.dump({"task": task, "device": "cpu", "rows": []}, f)
+  with pytest.raises(ValueError, match="merge: files of one task only"):
+    R.parse_args(["--merge", *paths])
