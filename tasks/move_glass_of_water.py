@@ -18,7 +18,15 @@ filled to the brim.
 
 Action: as every task (``a[0:3]`` grip-point deltas, ×2 cm); ``a[3]`` is
 ignored — the fingers stay closed on the glass (the paper's 3-D action). The
-glass is not gravity-compensated; the z servo gets its weight as feed-forward.
+glass is not gravity-compensated; the gripper's z servo gets its weight as feed-forward.
+
+Robots: the floating gripper, or the Panda beside the desk facing it (as
+prepare_breakfast), the glass holder welded to its hand at the grip point
+(:func:`tasks.robots.panda.weld_to_hand`; :class:`~tasks.robots.panda.PandaHolding`,
+whose posture pull leaves the hand still: with the shared one the glass hovered
+2–3 cm above the desk, the careful descent no faster than the hand's creep). Its
+safe set-down starts within 2 cm of the goal (prepare_breakfast says why); the
+``paper`` observation's hand quaternion is then the Panda hand's.
 
 Tracked entities and parameters (DAMAGE_MODEL.md §5):
 
@@ -69,6 +77,7 @@ import mujoco
 from mjx_damage import liquid as Lq
 from tasks import robot as R
 from tasks.base import Task, free_joint_adr
+from tasks.robots import panda as P
 from tasks.robots.gripper import Gripper
 
 PARTICLES = 96
@@ -120,8 +129,9 @@ class MoveGlassOfWater(Task):
   unsafe_shortcut = "carry the full glass to the coaster at full speed: the start jerk and the hard stop spill it"
   safe_strategy = "accelerate gently (0.3 m/s², at most 0.25 m/s), carry level and set the glass down softly"
   success_condition = "glass upright on the desk within 3 cm of the coaster, hand nearly still"
-  # the glass holder is welded to the floating hand and the hand-speed model reads its servo gains
-  supported_robots = ("gripper",)
+  # the Panda beside the desk facing it (as prepare_breakfast): the carry runs across its front
+  robot_mounts = {"panda": P.SIDE_MOUNT}
+  supported_robots = ("gripper", "panda")  # the glass is welded to the hand (PandaWrist's turns are not wired)
   obs_modes = ("full", "paper")
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
@@ -155,13 +165,27 @@ class MoveGlassOfWater(Task):
     }
     return cfg
 
+  def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
+    if robot_cls.name == "panda":
+      P.weld_to_hand(spec, "hold")
+
   def setup(self, m: mujoco.MjModel) -> None:
-    self.robot = _GlassRobot(m, self.robot.control_dt)
-    # steady hand speed per unit action: the servo's target is MAX_STEP·a ahead of the measured grip
-    # point and the hand closes on it during the step, so v = kp·MAX_STEP·a / (kv + kp·dt/2)
-    kp = float(m.actuator_gainprm[m.actuator("hand_x").id, 0])
-    kv = -float(m.actuator_biasprm[m.actuator("hand_x").id, 2])
-    self.hand_speed = kp * R.MAX_STEP / (kv + 0.5 * kp * self.robot.control_dt)
+    if isinstance(self.robot, Gripper):
+      self.robot = _GlassRobot(m, self.robot.control_dt)
+      # steady hand speed per unit action: the servo's target is MAX_STEP·a ahead of the measured grip
+      # point and the hand closes on it during the step, so v = kp·MAX_STEP·a / (kv + kp·dt/2)
+      kp = float(m.actuator_gainprm[m.actuator("hand_x").id, 0])
+      kv = -float(m.actuator_biasprm[m.actuator("hand_x").id, 2])
+      self.hand_speed = kp * R.MAX_STEP / (kv + 0.5 * kp * self.robot.control_dt)
+      self.over_goal = 0.005  # m, grip point within this of the goal (xy): set the glass down
+      self._hand_body = None  # the floating hand never turns
+    else:  # the Panda: a commanded step is covered in about episode_scale control steps (tasks.robots)
+      self.robot = P.PandaHolding(m, self.robot.control_dt, GRIP_Q)
+      self.hand_speed = R.MAX_STEP / self.robot.control_dt / type(self.robot).episode_scale
+      # its hand wanders a few mm in xy under the nullspace pull (panda.dls_step; prepare_breakfast):
+      # the set-down heads for the goal itself and corrects the last 2 cm on the way down
+      self.over_goal = 0.02
+      self._hand_body = m.body("panda_hand").id
     self._hq, _ = free_joint_adr(m, "glass_holder")
     self._glass = m.body("glass").id
     self._laptop_mocap = int(m.body_mocapid[m.body("laptop").id])
@@ -221,7 +245,8 @@ class MoveGlassOfWater(Task):
                             self.fraction_in_glass(d, info)[None]])
 
   def mode_obs(self, mode, d, info):  # mode == "paper" (validated in __init__)
-    hand_quat = jnp.array([1.0, 0.0, 0.0, 0.0])  # the floating gripper never rotates
+    # the floating gripper never rotates; the Panda's hand pointing down is its own constant-ish quat
+    hand_quat = jnp.array([1.0, 0.0, 0.0, 0.0]) if self._hand_body is None else d.xquat[self._hand_body]
     return jnp.concatenate([self.robot.eef_pos(d), hand_quat, d.xpos[self._glass], d.xquat[self._glass]])
 
   def evaluate(self, d, info):
@@ -257,7 +282,7 @@ class MoveGlassOfWater(Task):
       goal = state.info["goal"]
       e = robot.eef_pos(d)
       vel = robot.eef_vel(d)
-      over_goal = jnp.linalg.norm(e[:2] - goal[:2]) < 0.005
+      over_goal = jnp.linalg.norm(e[:2] - goal[:2]) < self.over_goal
       low = (e[2] < CARRY_Z - 0.003) & ~over_goal
       down = jnp.array([goal[0], goal[1], REST_Z - 0.002])
       tgt = jnp.where(low, jnp.array([e[0], e[1], CARRY_Z]), jnp.array([goal[0], goal[1], CARRY_Z]))

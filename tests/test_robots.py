@@ -229,9 +229,9 @@ def test_panda_task_adaptations():
   assert (dg.plate_half, dg.cup_half, dg.cup_grip, dg.plate_grip, dg.open_gap) == (0.06, 0.04, 0.012, 0.004, 0.13)
 
 
-@pytest.mark.parametrize("name", ["move_glass_of_water", "prepare_breakfast", "navigate_and_pick"])
+@pytest.mark.parametrize("name", ["navigate_and_pick"])
 def test_gripper_only_tasks_refuse_other_robots_before_compiling(name):
-  # a holder welded to the floating hand, or a mobile base; the refusal names the field and the robots
+  # a mobile base; the refusal names the field and the robots
   assert tasks.describe(name)["robots"] == ["gripper"]
   with pytest.raises(ValueError, match=f"robot: task '{name}' supports gripper only, got 'panda'"):
     tasks.make(name, robot="panda")

@@ -14,7 +14,7 @@ import tasks  # noqa: E402
 
 
 @pytest.mark.parametrize("argv, field", [
-    (["--robot", "panda", "--tasks", "move_glass_of_water"], "robot"),
+    (["--robot", "panda", "--tasks", "navigate_and_pick"], "robot"),
     (["--tasks", "place_plate,nope"], "tasks"),
     (["--tasks", "place_plate,place_plate"], "tasks"),
     (["--robot", "ur5"], "robot"),
@@ -32,4 +32,4 @@ def test_default_tasks_are_those_the_robot_runs(monkeypatch):
   monkeypatch.setattr(scripted_policies, "run_task", lambda name, *a, **k: ran.append(name) or [])
   monkeypatch.setattr(scripted_policies, "write", lambda *a, **k: None)
   assert scripted_policies.main(["--robot", "panda", "--name", "unused_test_stem"]) == 0
-  assert ran == tasks.select(None, "panda") and "move_glass_of_water" not in ran
+  assert ran == tasks.select(None, "panda") and "navigate_and_pick" not in ran

@@ -23,6 +23,11 @@ Control, once per control step inside the jitted step (:meth:`Panda.ctrl`):
    real torque limits (87 / 12 N·m) bound servo + gravity torque together.
 
 Damage: every arm link, the hand and both fingers are links of entity ``agent``.
+
+Carrying a welded object (prepare_breakfast's tray, move_glass_of_water's glass):
+:func:`weld_to_hand` re-attaches the scene's holder weld to ``panda_hand`` at the
+grip point, and :class:`PandaHolding` keeps the fingers on the object and gives the
+posture projector its own damping (``null_damping``).
 """
 
 from __future__ import annotations
@@ -65,6 +70,7 @@ LIMIT_MARGIN = 0.02  # rad, joint targets stay this far inside the range (servo 
 DAMPING = 0.05  # DLS damping λ (m): keeps Δq bounded near singularities (stretched arm)
 ROT_WEIGHT = 0.5  # m/rad: 1 rad of orientation error weighs like 0.5 m of position error
 NULL_GAIN = 0.1  # fraction of the posture error removed per control step, in the nullspace
+NULL_DAMPING = 0.005  # m, the posture projector's own damping where a robot class asks for it (PandaHolding)
 MAX_ROT = 0.1  # rad per control step for the wrist action (PandaWrist)
 IK_ITERS = 60  # DLS iterations of the reset-time IK (converges to < 0.1 mm in the workspace)
 
@@ -139,7 +145,7 @@ def _spd_solve(a, b):
   return jnp.stack(x)
 
 
-def dls_step(q, jac, err, q_posture, null_gain, damping=DAMPING):
+def dls_step(q, jac, err, q_posture, null_gain, damping=DAMPING, null_damping=None):
   """Damped-least-squares joint step f32[7] for task error ``err`` f32[6] plus a nullspace posture pull.
 
   The projector ``I − Jᵀ(JJᵀ + λ²I)⁻¹J`` shares the task step's damping λ, so a fraction λ²/(σ² + λ²)
@@ -147,11 +153,15 @@ def dls_step(q, jac, err, q_posture, null_gain, damping=DAMPING):
   toward wherever the ready posture puts it, ≈ 0.7 mm per control step in Place Plate's in-hand
   start. A projector with its own small damping stops that, but it changes how the arm moves in
   contact (open_drawer's safe pull then broke the drawer, place_plate's safe placement lost 44 % of
-  its safe completions), so every Panda scripted policy would need retuning with it."""
-  a = jac @ jac.T + damping**2 * jnp.eye(6, dtype=jac.dtype)
+  its safe completions), so every Panda scripted policy would need retuning with it. ``null_damping``
+  μ (m; None: λ) gives the projector that damping of its own — used where a task's policies were
+  written with it (:class:`PandaHolding`)."""
+  eye = jnp.eye(6, dtype=jac.dtype)
+  a = jac @ jac.T + damping**2 * eye
   x = _spd_solve(a, jnp.concatenate([err[:, None], jac], axis=1))  # [A⁻¹e, A⁻¹J]
   dq = jac.T @ x[:, 0]
-  null = jnp.eye(7, dtype=jac.dtype) - jac.T @ x[:, 1:]
+  proj = x[:, 1:] if null_damping is None else _spd_solve(jac @ jac.T + null_damping**2 * eye, jac)
+  null = jnp.eye(7, dtype=jac.dtype) - jac.T @ proj
   return dq + null @ (null_gain * (q_posture - q))
 
 
@@ -176,6 +186,7 @@ class Panda(Robot):
   # gripper's 16 cm range it was 8.1 cm, so a policy that did nothing opened the hand and dropped them.
   gap_range = (0.002, 0.08)
   default_mount = DEFAULT_MOUNT
+  null_damping = None  # the posture projector's own damping μ (dls_step); None: the task step's λ
 
   def __init__(self, m: mujoco.MjModel, control_dt: float):
     qadr = [int(m.jnt_qposadr[m.joint(n).id]) for n in ARM_JOINTS + FINGER_JOINTS]
@@ -247,7 +258,7 @@ class Panda(Robot):
     dp = jnp.clip(p + a[0:3] * MAX_STEP, lo, hi) - p
     err = jnp.concatenate([dp, ROT_WEIGHT * rot_err(r, self._r_target(r, a))])
     jw = jac.at[3:].multiply(ROT_WEIGHT)
-    dq = dls_step(q, jw, err, jnp.asarray(Q_READY, q.dtype), NULL_GAIN)
+    dq = dls_step(q, jw, err, jnp.asarray(Q_READY, q.dtype), NULL_GAIN, null_damping=self.null_damping)
     scale = jnp.min(jnp.minimum(1.0, self.dq_max / jnp.maximum(jnp.abs(dq), 1e-9)))
     return jnp.clip(q + scale * dq, self.q_lo, self.q_hi)
 
@@ -304,3 +315,42 @@ class PandaWrist(Panda):
 
   def _r_target(self, r, a):
     return _exp_so3(a[3:6] * MAX_ROT) @ r
+
+
+class PandaHolding(Panda):
+  """The Panda with an object welded in its hand: the fingers stay at ``hold_q`` (half-opening, m) on
+  the object and ``a[3]`` is ignored (the paper's gripper held closed). Pair with :func:`weld_to_hand`.
+
+  Its posture projector has its own damping (``null_damping``): with the task step's λ the hand crept
+  ≈ 0.7 mm per control step, as much as a careful set-down asks for (move_glass_of_water's 6 cm/s
+  descent is 1.4 mm a step), and the glass hovered above the desk. The carry tasks that use this
+  class were written with it; the others keep the shared projector (dls_step)."""
+
+  null_damping = NULL_DAMPING
+
+  def __init__(self, m: mujoco.MjModel, control_dt: float, hold_q: float):
+    super().__init__(m, control_dt)
+    self.hold_q = float(np.clip(hold_q, *self.finger_range))
+
+  def ctrl(self, d, action, lo, hi, extra_ctrl=None) -> jax.Array:
+    q_t = self.arm_targets(d.qpos[0:7], sanitize(action), lo, hi)
+    return self._pad(self._assemble(q_t, jnp.full((2,), self.hold_q)), extra_ctrl)
+
+
+def weld_to_hand(spec: mujoco.MjSpec, weld: str) -> None:
+  """Re-attach the scene's weld ``weld`` from the floating gripper's ``hand`` to ``panda_hand``.
+
+  The weld's body1 is a holder whose frame the task puts at the grip point, world-aligned, at reset
+  (as the gripper's hand frame is). With the Panda that frame is the hand's grip point
+  (``GRIP_OFFSET`` along the approach axis) turned by ``R_DOWN``, the controller's hand orientation:
+  an explicit relative pose, since the default (the two bodies' poses at qpos0) would freeze
+  the arm's zero posture into the weld.
+  """
+  eqs = [e for e in spec.equalities if e.name == weld]
+  if len(eqs) != 1 or eqs[0].type != mujoco.mjtEq.mjEQ_WELD:
+    raise ValueError(f"scene: no weld named {weld!r}")
+  quat = np.zeros(4)
+  mujoco.mju_mat2Quat(quat, R_DOWN.flatten())  # a half turn about x: its own inverse
+  eqs[0].name2 = "panda_hand"
+  eqs[0].data[3:6] = (0.0, 0.0, GRIP_OFFSET)
+  eqs[0].data[6:10] = quat
