@@ -92,11 +92,10 @@ class _PandaTilt(P.Panda):
     return super().ctrl(d, a.at[3].set(1.0), lo, hi, extra_ctrl=jnp.reshape(tilt, (1,)))
 
 
-# per robot: the robot class with the tilt channel, and the weld of the glass holder (a world-aligned
-# frame at the grip point when the hand points down) to the robot's hand body: (body, relpose of the
-# hand in the holder's frame; None: the pose at qpos0, where the gripper's hand frame is the holder's)
-TILT_ROBOTS = {"gripper": (_WristRobot, "hand", None),
-               "panda": (_PandaTilt, "panda_hand", (0.0, 0.0, P.GRIP_OFFSET, 0.0, 1.0, 0.0, 0.0))}
+# per robot: the robot class with the tilt channel. The glass holder (a world-aligned frame at the
+# grip point when the hand points down) is welded to the gripper's hand at its pose at qpos0, where
+# the two frames coincide, and to the Panda's hand by panda.weld_to_hand.
+TILT_ROBOTS = {"gripper": _WristRobot, "panda": _PandaTilt}
 
 
 def tilt_action(theta):
@@ -132,16 +131,11 @@ class PourWater(Task):
   def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
     if robot_cls.name not in TILT_ROBOTS:
       raise ValueError(f"robot: pour_water has no tilt channel for {robot_cls.name!r}; valid: {', '.join(TILT_ROBOTS)}")
-    _, body, relpose = TILT_ROBOTS[robot_cls.name]
-    if relpose is not None:
-      weld = next(e for e in spec.equalities if e.name == "hold")
-      weld.name2 = body
-      data = list(weld.data)
-      data[3:10] = relpose
-      weld.data = data
+    if robot_cls.name == "panda":
+      P.weld_to_hand(spec, "hold")
 
   def setup(self, m: mujoco.MjModel) -> None:
-    self.robot = TILT_ROBOTS[self.robot.name][0](m, self.robot.control_dt)
+    self.robot = TILT_ROBOTS[self.robot.name](m, self.robot.control_dt)
     self._hq, _ = free_joint_adr(m, "glass_holder")
     j = m.joint("tilt").id
     self._tq, self._tv = int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
