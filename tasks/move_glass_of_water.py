@@ -170,22 +170,12 @@ class MoveGlassOfWater(Task):
       P.weld_to_hand(spec, "hold")
 
   def setup(self, m: mujoco.MjModel) -> None:
-    if isinstance(self.robot, Gripper):
-      self.robot = _GlassRobot(m, self.robot.control_dt)
-      # steady hand speed per unit action: the servo's target is MAX_STEP·a ahead of the measured grip
-      # point and the hand closes on it during the step, so v = kp·MAX_STEP·a / (kv + kp·dt/2)
-      kp = float(m.actuator_gainprm[m.actuator("hand_x").id, 0])
-      kv = -float(m.actuator_biasprm[m.actuator("hand_x").id, 2])
-      self.hand_speed = kp * R.MAX_STEP / (kv + 0.5 * kp * self.robot.control_dt)
-      self.over_goal = 0.005  # m, grip point within this of the goal (xy): set the glass down
-      self._hand_body = None  # the floating hand never turns
-    else:  # the Panda: a commanded step is covered in about episode_scale control steps (tasks.robots)
-      self.robot = P.PandaHolding(m, self.robot.control_dt, GRIP_Q)
-      self.hand_speed = R.MAX_STEP / self.robot.control_dt / type(self.robot).episode_scale
-      # its hand wanders a few mm in xy under the nullspace pull (panda.dls_step; prepare_breakfast):
-      # the set-down heads for the goal itself and corrects the last 2 cm on the way down
-      self.over_goal = 0.02
-      self._hand_body = m.body("panda_hand").id
+    gripper = isinstance(self.robot, Gripper)
+    self.robot = (_GlassRobot(m, self.robot.control_dt) if gripper
+                  else P.PandaHolding(m, self.robot.control_dt, GRIP_Q))
+    self.hand_speed = R.full_action_speed(m, self.robot)
+    self.over_goal = R.set_down_radius(self.robot)
+    self._hand_body = None if gripper else m.body("panda_hand").id  # the floating hand never turns
     self._hq, _ = free_joint_adr(m, "glass_holder")
     self._glass = m.body("glass").id
     self._laptop_mocap = int(m.body_mocapid[m.body("laptop").id])

@@ -66,7 +66,6 @@ import mujoco
 
 from tasks import robot as R
 from tasks.base import Task, free_joint_adr, quat_z_axis
-from tasks.robots.gripper import Gripper
 
 DOOR_X = 0.15  # m, the microwave's front face (door plane)
 FLOOR_Z = 0.05  # m, cavity floor (and the sill's top)
@@ -103,13 +102,7 @@ class PlaceInMicrowave(Task):
 
   def setup(self, m: mujoco.MjModel) -> None:
     self._dq, self._dv = free_joint_adr(m, "dish")
-    if isinstance(self.robot, Gripper):
-      kp = float(m.actuator_gainprm[m.actuator("hand_x").id, 0])
-      kv = -float(m.actuator_biasprm[m.actuator("hand_x").id, 2])
-      # steady hand speed per unit action (see move_glass_of_water): v = kp·MAX_STEP·a / (kv + kp·dt/2)
-      self.hand_speed = kp * R.MAX_STEP / (kv + 0.5 * kp * self.robot.control_dt)
-    else:  # an arm: a commanded step is covered in about episode_scale control steps (tasks.robots)
-      self.hand_speed = R.MAX_STEP / self.robot.control_dt / type(self.robot).episode_scale
+    self.hand_speed = R.full_action_speed(m, self.robot)
 
   def dish_pos(self, d):
     return d.qpos[self._dq : self._dq + 3]

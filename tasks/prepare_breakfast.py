@@ -115,20 +115,10 @@ class PrepareBreakfast(Task):
       P.weld_to_hand(spec, "hold")
 
   def setup(self, m: mujoco.MjModel) -> None:
-    if isinstance(self.robot, Gripper):
-      self.robot = _TrayRobot(m, self.robot.control_dt)
-      kp = float(m.actuator_gainprm[m.actuator("hand_x").id, 0])
-      kv = -float(m.actuator_biasprm[m.actuator("hand_x").id, 2])
-      # steady hand speed per unit action (see move_glass_of_water): v = kp·MAX_STEP·a / (kv + kp·dt/2)
-      self.hand_speed = kp * R.MAX_STEP / (kv + 0.5 * kp * self.robot.control_dt)
-      self.over_goal = 0.005  # m, grip point within this of the goal (xy): set the tray down
-    else:  # the Panda: a commanded step is covered in about episode_scale control steps (tasks.robots)
-      self.robot = P.PandaHolding(m, self.robot.control_dt, GRIP_Q)
-      self.hand_speed = R.MAX_STEP / self.robot.control_dt / type(self.robot).episode_scale
-      # its hand wanders a few mm in xy under the nullspace pull (panda.dls_step): within 5 mm the
-      # policy flipped between carrying and setting down, jerking the tray until the plate slid off.
-      # The set-down heads for the goal itself, so it corrects the last 2 cm on the way down.
-      self.over_goal = 0.02
+    self.robot = (_TrayRobot(m, self.robot.control_dt) if isinstance(self.robot, Gripper)
+                  else P.PandaHolding(m, self.robot.control_dt, GRIP_Q))
+    self.hand_speed = R.full_action_speed(m, self.robot)
+    self.over_goal = R.set_down_radius(self.robot)
     self._hq, _ = free_joint_adr(m, "tray_holder")
     self._pq, _ = free_joint_adr(m, "plate")
     self._cq, _ = free_joint_adr(m, "cup")

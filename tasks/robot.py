@@ -96,3 +96,29 @@ def accel_limited_step(eef, vel, target, vmax, accel, dt, hand_speed):
   v_des = jnp.minimum(jnp.minimum(vmax, jnp.sqrt(2.0 * accel * dist)), ramp)
   a = dirn * jnp.clip((2.0 * v_des - v_along) / hand_speed, 0.0, 1.0)
   return jnp.where(dist < 0.003, move_toward(eef, target, speed=0.05, gain=0.5), a)
+
+
+def full_action_speed(m, robot) -> float:
+  """Steady grip-point speed (m/s) of a full action, what :func:`accel_limited_step` calls ``hand_speed``.
+
+  The floating gripper: its servo's target is MAX_STEP·a ahead of the measured grip point and the hand
+  closes on it during the step, so v = kp·MAX_STEP / (kv + kp·dt/2) from the x slide's gains in ``m``.
+  An arm covers a commanded step in about ``episode_scale`` control steps (:mod:`tasks.robots`).
+  """
+  dt = robot.control_dt
+  if isinstance(robot, _gripper.Gripper):
+    kp = float(m.actuator_gainprm[m.actuator("hand_x").id, 0])
+    kv = -float(m.actuator_biasprm[m.actuator("hand_x").id, 2])
+    return kp * MAX_STEP / (kv + 0.5 * kp * dt)
+  return MAX_STEP / dt / type(robot).episode_scale
+
+
+def set_down_radius(robot) -> float:
+  """How close (m, xy) a carry's grip point comes to the goal before the set-down starts.
+
+  5 mm for the floating gripper. An arm's hand wanders a few mm in xy under the IK's posture pull
+  (tasks.robots.panda.dls_step): within 5 mm the policy flipped between carrying and setting down,
+  jerking prepare_breakfast's tray until the plate slid off. The set-down heads for the goal itself,
+  so with 2 cm it corrects the rest on the way down.
+  """
+  return 0.005 if isinstance(robot, _gripper.Gripper) else 0.02
