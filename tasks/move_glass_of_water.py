@@ -235,7 +235,7 @@ class MoveGlassOfWater(Task):
                             self.fraction_in_glass(d, info)[None]])
 
   def mode_obs(self, mode, d, info):  # mode == "paper" (validated in __init__)
-    # the floating gripper never rotates; the Panda's hand pointing down is its own constant-ish quat
+    # the floating gripper never rotates; the Panda's hand quaternion (nearly constant: held pointing down)
     hand_quat = jnp.array([1.0, 0.0, 0.0, 0.0]) if self._hand_body is None else d.xquat[self._hand_body]
     return jnp.concatenate([self.robot.eef_pos(d), hand_quat, d.xpos[self._glass], d.xquat[self._glass]])
 
