@@ -79,8 +79,9 @@ class _Budget(Exception):
   """Raised from brax's per-evaluation callback once the wall budget is spent."""
 
 
-def device_slug() -> str:
-  kind = jax.devices()[0].device_kind
+def device_slug(kind: str | None = None) -> str:
+  """File-name slug of a device kind (default: this machine's first device)."""
+  kind = jax.devices()[0].device_kind if kind is None else kind
   return re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_") or jax.default_backend()
 
 
@@ -347,8 +348,7 @@ def merge(docs: list[dict], stem: str) -> dict:
 def main(argv=None) -> int:
   a = parse_args(argv)
   if a.merge is not None:
-    slug = re.sub(r"[^a-z0-9]+", "_", a.merge_docs[0]["device"].lower()).strip("_")
-    stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{slug}")
+    stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug(a.merge_docs[0]['device'])}")
     merged = merge(a.merge_docs, stem)
     print(f"wrote {stem}.json / .md ({len(merged['rows'])} rows)")
     return 0
