@@ -178,6 +178,7 @@ def eval_runs(args, d: int, save=lambda part: None) -> dict:
   import numpy as np
 
   import train.evaluate as E
+  import train.sweep as S
   from apps import resolve as R
   from train.envs import resolve_task, task_episode_length
 
@@ -188,6 +189,8 @@ def eval_runs(args, d: int, save=lambda part: None) -> dict:
   ev = E.Evaluator(env, policy, T, distributed.select_devices(d))
   keys = np.tile(np.asarray(E.episode_keys(0, episodes)), (len(args.fragility), 1))
   frag = np.repeat(np.asarray(args.fragility, np.float32), episodes)
+  order = S.device_local_order(episodes, len(args.fragility), d)  # as train.sweep hands the batch over
+  keys, frag = keys[order], frag[order]
   t0 = time.perf_counter()
   ev.run(keys, frag)
   compile_s = time.perf_counter() - t0

@@ -177,6 +177,20 @@ def test_sweep_rejects_bad_arguments(capsys):
     assert f"{field}:" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("episodes,levels,devices", [(8, 4, 2), (6, 3, 3), (7, 2, 2), (5, 4, 1), (3, 2, 4)])
+def test_device_local_order_gives_each_device_its_episodes_at_every_level(episodes, levels, devices):
+  order = S.device_local_order(episodes, levels, devices)
+  assert sorted(order) == list(range(episodes * levels))  # a permutation of the level-major rows
+  if devices == 1:
+    assert list(order) == list(range(episodes * levels))
+  if episodes % devices == 0:  # the evaluator's equal contiguous shards: one block of episodes each
+    for shard in np.split(order, devices):
+      eps, lvls = shard % episodes, shard // episodes
+      assert len(set(eps)) == episodes // devices and sorted(set(lvls)) == list(range(levels))
+      for lv in range(levels):
+        assert sorted(eps[lvls == lv]) == sorted(set(eps))
+
+
 def test_sweep_markdown_table():
   m = {"completion": 0.5, "safe_completion": 0.25, "avg_health": 90.0, "zero_damage_rate": 0.1,
        "cost_mean": 3.0, "episodes": 4}

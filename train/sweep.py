@@ -7,6 +7,14 @@ same episode keys are reused across levels (common random numbers: a level's
 difference is the fragility, not the draw). Every seed reuses the executable;
 the JSON records how many were compiled (1 per task × policy).
 
+On several devices the batch is handed to the evaluator in :func:`device_local_order`:
+each device gets its own share of the episodes at every level, not whole levels. The rows
+are the same, so are the results; the order matters for speed only. MJX's solver loops run
+until the slowest row of a device's batch has converged, and the copies of one episode at
+the different levels share their physics (fragility changes health, not motion), so a device
+holding E/D episodes × L levels waits on E/D distinct trajectories, not on E (measured on
+2 GPUs: ``benchmarks/results/multi_gpu_nvidia_h200_eval_layout.md``).
+
 CLI (:mod:`apps.sweep_cli`)::
 
     mjx-damage sweep --tasks place_plate --policies scripted:safe,scripted:unsafe \
@@ -48,6 +56,22 @@ def check_sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[i
   E.check_args(episodes, 1.0, safe_threshold)
 
 
+def device_local_order(episodes: int, num_levels: int, num_devices: int) -> np.ndarray:
+  """Row order of a sweep batch that gives each device its own episodes at every level.
+
+  The natural batch is level-major (row ``level * episodes + episode``). Returns ``order``:
+  int[num_levels * episodes], a permutation of those rows such that the evaluator's contiguous
+  per-device shards each hold a contiguous block of about ``episodes / num_devices`` episodes at
+  all levels (exactly, when ``num_devices`` divides ``episodes``). Run ``batch[order]``; the
+  results of row ``order[j]`` are at ``j`` (``np.argsort(order)`` maps them back). One device: the
+  identity.
+  """
+  rows = np.arange(num_levels * episodes)
+  level, episode = rows // episodes, rows % episodes
+  block = episode * num_devices // episodes  # which device's share the episode is in
+  return np.lexsort((episode, level, block))
+
+
 def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], fragility: Sequence[float],
           episodes: int, safe_threshold: float = 95.0, episode_length: Optional[int] = None,
           devices=None, log=print, on_progress=None, *, make_env: Callable, make_policy: Callable,
@@ -82,7 +106,9 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
       for seed in seeds:
         keys = E.episode_keys(seed, episodes)
         keys = np.tile(np.asarray(keys), (len(levels), 1))  # same episodes at every level
-        per_ep = ev.run(keys, frag)
+        order = device_local_order(episodes, len(levels), len(ev.devices))
+        per_ep = ev.run(keys[order], frag[order])
+        per_ep = {k: v[np.argsort(order)] for k, v in per_ep.items()}  # back to level-major
         for i, f in enumerate(levels):
           sl = slice(i * episodes, (i + 1) * episodes)
           m = E.metrics({k: v[sl] for k, v in per_ep.items()}, env.entity_names, safe_threshold)
