@@ -60,6 +60,8 @@ Q_HI = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
 V_MAX = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s, rated joint velocity
 Q_READY = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4])
 R_DOWN = np.diag([1.0, -1.0, -1.0])  # hand z down, hand y (finger axis) along world y
+# hand z (approach) along world +x, hand y (finger axis) along world y, hand x down (PandaForward)
+R_FORWARD = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 
 DEFAULT_MOUNT = (-0.5, 0.0, 0.0, 0.0)  # base x, y, z (m), yaw (rad): 0.5 m behind the task origin
 # Beside the work area, facing it (yaw 90°), for tasks whose objects lie near x ≈ −0.25 m at counter height:
@@ -315,6 +317,21 @@ class PandaWrist(Panda):
 
   def _r_target(self, r, a):
     return _exp_so3(a[3:6] * MAX_ROT) @ r
+
+
+class PandaForward(Panda):
+  """The Panda with its hand held pointing forward (``R_FORWARD``: approach along world +x, fingers
+  closing along world y, palm 6 cm tall) instead of down, for tasks that reach under an overhang.
+
+  Pointing down, the joint-7 frame rides 22 cm above the grip point: above a microwave's 20 cm
+  cavity or a coffee machine's brew head. Pointing forward, the wrist trails the hand at the grip
+  point's height, and the hand reaches in as far as the object's depth allows. A task that selects
+  it grasps objects from behind (grip point ``FINGER_LENGTH`` deep at most, palm clear of the
+  object) and keeps the grip 4.5 cm (link 7's radius) above anything the wrist passes over."""
+
+  def __init__(self, m: mujoco.MjModel, control_dt: float):
+    super().__init__(m, control_dt)
+    self.r_des = R_FORWARD.astype(np.float32)
 
 
 class PandaHolding(Panda):
