@@ -71,7 +71,7 @@ above the grip point, above the 20 cm cavity. ``edit_scene`` adapts the scene to
   Released, the gripper's gap must exceed 7 cm.
 
 Scripted policies with the Panda, 256 episodes (benchmarks/results/scripted_policies_panda_cpu.md):
-safe 100 % completion, 100 % safe; unsafe 100 % completion, 0 % safe.
+safe 100 % completion, 100 % safe; unsafe 99.6 % completion, 0.4 % safe.
 """
 
 from __future__ import annotations
@@ -81,8 +81,8 @@ import jax.numpy as jnp
 import mujoco
 
 from tasks import robot as R
-from tasks.robots import panda as P
 from tasks.base import Task, free_joint_adr, quat_z_axis
+from tasks.robots import panda as P
 
 DOOR_X = 0.15  # m, the microwave's front face (door plane)
 FLOOR_Z = 0.05  # m, cavity floor (and the sill's top)
@@ -99,12 +99,8 @@ INSERT_SPEED = 0.25  # m/s, the safe insertion (accelerating and braking at INSE
 INSERT_ACCEL = 1.0  # m/s²
 HOVER_Z = 0.10  # m, grip-point height when moving the open hand over the counter
 
-# The Panda (PandaForward: hand pointing into the oven, fingers closing across the dish). Its dish is a
-# glass food box, 8 × 6 × 7 cm (the 8 cm stroke takes 6 cm with 1 cm clearance per side), gripped from
-# behind 2 cm above its centre, on a 5 cm stand level with the sill: the wrist (link 7, radius 4.5 cm)
-# trails the grip point at its height and must clear the counter at pick-up and the cavity floor at
-# set-down. 8 cm long, not 12: the pads (5 cm along the approach) then hold it round its centre of mass;
-# holding the 12 cm dish by its back half, the dish pitched nose-down and struck the floor with its front edge.
+# The Panda (PandaForward; the module docstring says why each of these): its dish, grip point, stand,
+# start ranges and mount.
 PANDA_DISH_HALF = (0.04, 0.03, 0.035)  # m
 PANDA_GRIP = (0.01, 0.02)  # m, grip point from the dish centre (x, z): palm 5 mm behind its back face
 STAND_Z = FLOOR_Z  # m, top of the Panda's stand

@@ -59,7 +59,8 @@ point) would be inside the brew head, which starts 17 cm up. ``edit_scene`` adap
   once the hand is 3 mm below its grasp height (the tilted mug's centre stays a few mm high), and
   the open pads rise clear of its rim before backing out (low, they dragged it out of the bay).
 
-Scripted policies with the Panda, 256 episodes (benchmarks/results/scripted_policies_panda_cpu.md).
+Scripted policies with the Panda, 256 episodes (benchmarks/results/scripted_policies_panda_cpu.md):
+safe 100 % completion, 100 % safe; unsafe 92.2 % completion, 0 % safe.
 """
 
 from __future__ import annotations
