@@ -1,6 +1,7 @@
 """The evaluation sweep on every local device: one SPMD program, or one 1-device program per device.
 
-Issue 21's diagnosis of the 2-GPU sweep (``benchmarks/results/multi_gpu_nvidia_h200_eval_diagnosis.md``).
+Issue 21's diagnosis of the 2-GPU sweep (``benchmarks/results/multi_gpu_nvidia_h200_eval_diagnosis.md``;
+its cause, the sweep's batch layout, and these modes' rates: ``multi_gpu_nvidia_h200_eval_layout.md`` beside it).
 :class:`train.evaluate.Evaluator` over D devices is one SPMD program (``shard_map``). This script
 times, in one process, a sequence of ``PARTITIONER:MODE`` steps (``--sequence``):
 
