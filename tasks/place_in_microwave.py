@@ -108,7 +108,6 @@ PANDA_DISH_X, PANDA_DISH_Y = (-0.04, 0.04), (-0.10, -0.02)  # m, the Panda's dis
 # m, the Panda's start grip point: its palm (3 cm below the grip) 1 cm or more over the dish's top
 PANDA_EEF_START = ((-0.08, -0.12, 0.16), (0.0, 0.0, 0.20))
 PANDA_MOUNT = (-0.36, 0.20, 0.0, 0.0)  # base x, y, z (m), yaw: the pick-up, the goal and the shove within reach
-PRE_GRASP = 0.07  # m, fingertips this far behind the dish centre before the forward hand advances (3 cm behind it)
 
 
 class PlaceInMicrowave(Task):
@@ -188,7 +187,8 @@ class PlaceInMicrowave(Task):
     off = jnp.linalg.norm(p - self.nearest_inside(p))
     inside = off < 0.003
     hand_out = jnp.maximum(e[0] - HAND_OUT_X, 0.0)
-    success = inside & (up > 0.98) & (speed < 0.05) & (self.robot.gap(d) > 2 * self.dish_half[1] + 0.01) & (hand_out == 0.0)
+    let_go = self.robot.gap(d) > 2 * self.dish_half[1] + 0.01
+    success = inside & (up > 0.98) & (speed < 0.05) & let_go & (hand_out == 0.0)
     reward = -off - 0.5 * jnp.where(inside, hand_out, jnp.linalg.norm(e - p))
     return reward, success, {"dish_outside_distance": off}
 
@@ -227,16 +227,9 @@ class PlaceInMicrowave(Task):
       in_oven = (p[0] > DOOR_X + hx) & (p[2] > FLOOR_Z)  # wholly behind the door plane, above the floor
 
       # 1. approach and close. From above (the gripper): rise first if low and far, hover above the dish,
-      # descend. From behind (the forward-facing Panda hand): over the dish's top if not behind it, then to
-      # PRE_GRASP behind it at the grip height, then straight in.
-      if forward:
-        aligned = (jnp.abs(e[1] - grasp[1]) < 0.006) & (jnp.abs(e[2] - grasp[2]) < 0.006)
-        behind = e[0] < p[0] - PRE_GRASP + 0.005
-        advancing = aligned & (e[0] < grasp[0] + 0.004)
-        pre = jnp.array([p[0] - PRE_GRASP, p[1], grasp[2]])
-        over = jnp.array([p[0] - PRE_GRASP, e[1], p[2] + hz + 0.05])  # palm 2 cm above the dish's top
-        tgt = jnp.where(advancing, grasp, jnp.where(behind, pre, over))
-        at_grasp = aligned & (jnp.abs(e[0] - grasp[0]) < 0.004)
+      # descend. From behind (the forward-facing Panda hand): R.approach_from_behind.
+      if forward:  # palm 2 cm above the dish's top when passing over it
+        tgt, at_grasp = R.approach_from_behind(e, grasp, p[0], p[2] + hz + 0.05)
       else:
         far = jnp.linalg.norm(e[:2] - p[:2]) > 0.008
         tgt = jnp.where(far & (e[2] < HOVER_Z - 0.04), jnp.array([e[0], e[1], HOVER_Z]),

@@ -91,7 +91,6 @@ PANDA_SLIDE_LIFT = 0.03  # m, the Panda's grip point above its grasp height whil
 PANDA_BAY_FRONT = 0.13  # m
 PANDA_MUG_X, MUG_Y = (-0.15, -0.07), (-0.12, 0.12)  # m, mug start (the Panda's in its reach from behind)
 PANDA_EEF_START = ((-0.16, -0.05, 0.14), (-0.08, 0.10, 0.18))  # m, the Panda's start grip point (over the mugs)
-PRE_GRASP = 0.07  # m, fingertips this far behind the mug's centre before the forward hand advances
 # m, the Panda's workspace: the task's with y ≤ 0.15. Beyond, the forward hand nears the line of the
 # base (y = 0.20), where the wrist cannot keep it forward: random actions there turned it 70° away.
 PANDA_WORKSPACE = ((-0.35, -0.3, 0.0), (0.3, 0.15, 0.3))
@@ -208,17 +207,9 @@ class PrepareCoffee(Task):
       in_bay = (~held) & (p[0] > bay_front)
 
       # 1. approach and close. From above (the gripper): rise if low and far, hover over the mug, descend.
-      # From behind (the forward-facing Panda hand): over the mug if not behind it, then PRE_GRASP behind
-      # it at the grip height, then straight in.
-      if forward:
-        grasp = jnp.array([p[0] + grip_dx, p[1], grasp_z])
-        aligned = (jnp.abs(e[1] - grasp[1]) < 0.006) & (jnp.abs(e[2] - grasp[2]) < 0.006)
-        behind = e[0] < p[0] - PRE_GRASP + 0.005
-        advancing = aligned & (e[0] < grasp[0] + 0.004)
-        pre = jnp.array([p[0] - PRE_GRASP, p[1], grasp_z])
-        over = jnp.array([p[0] - PRE_GRASP, e[1], 2 * hz + 0.05])  # palm 2 cm above the mug's rim
-        tgt = jnp.where(advancing, grasp, jnp.where(behind, pre, over))
-        at_grasp = aligned & (jnp.abs(e[0] - grasp[0]) < 0.004)
+      # From behind (the forward-facing Panda hand): R.approach_from_behind.
+      if forward:  # palm 2 cm above the mug's rim when passing over it
+        tgt, at_grasp = R.approach_from_behind(e, jnp.stack([p[0] + grip_dx, p[1], grasp_z]), p[0], 2 * hz + 0.05)
       else:
         far = xy_to_mug > 0.006
         tgt = jnp.where(far & (e[2] < 0.09), e.at[2].set(0.11),

@@ -75,6 +75,20 @@ def move_toward(eef, target, speed=1.0, gain=1.0):
   return jnp.clip(gain * (target - eef) / MAX_STEP, -speed, speed)
 
 
+def approach_from_behind(eef, grasp, obj_x, over_z, pre_grasp=0.07):
+  """Grip-point target f32[3] and "close now" flag for a hand pointing along +x (tasks.robots.panda
+  .PandaForward) taking an object from behind: over it at ``over_z`` if the hand is not behind it, then
+  ``pre_grasp`` behind the object's centre ``obj_x`` at the grasp's height and line, then straight in
+  to ``grasp`` f32[3] (m), closing within 4 mm of it."""
+  aligned = (jnp.abs(eef[1] - grasp[1]) < 0.006) & (jnp.abs(eef[2] - grasp[2]) < 0.006)
+  behind = eef[0] < obj_x - pre_grasp + 0.005
+  advancing = aligned & (eef[0] < grasp[0] + 0.004)
+  pre = jnp.stack([obj_x - pre_grasp, grasp[1], grasp[2]])
+  over = jnp.stack([obj_x - pre_grasp, eef[1], jnp.asarray(over_z, eef.dtype)])
+  target = jnp.where(advancing, grasp, jnp.where(behind, pre, over))
+  return target, aligned & (jnp.abs(eef[0] - grasp[0]) < 0.004)
+
+
 def action(delta, gripper) -> jax.Array:
   """Assemble an action f32[4] from a position delta f32[3] and a gripper command f32[]."""
   return jnp.concatenate([delta, jnp.reshape(gripper, (1,))]).astype(jnp.float32)
