@@ -116,6 +116,7 @@ def main(argv=None) -> int:
     args = (jax.device_put(ev.params, ev.replicated), jax.device_put(k, ev.sharding), jax.device_put(f, ev.sharding))
     return ev._fn(*args)
 
+  pool = concurrent.futures.ThreadPoolExecutor(len(devs))  # the threads mode's one host thread per device
   for partitioner, mode in a.sequence:
     jax.config.update("jax_use_shardy_partitioner", partitioner == "shardy")
     if mode == "spmd":
@@ -129,7 +130,6 @@ def main(argv=None) -> int:
         fn = lambda: jax.block_until_ready([start(ev, part(keys, i), part(frag, i)) for i, ev in enumerate(evs)])  # noqa: E731
         n = per * len(devs)
       else:  # threads
-        pool = concurrent.futures.ThreadPoolExecutor(len(devs))
         fn = lambda: list(pool.map(lambda i: jax.block_until_ready(start(evs[i], part(keys, i), part(frag, i))), range(len(devs))))  # noqa: E731
         n = per * len(devs)
     fn()
@@ -141,6 +141,7 @@ def main(argv=None) -> int:
     d = 1 if mode == "one" else len(devs)
     print(f"dispatch {partitioner}:{mode} ({d} device(s)): {np.mean(rates):,.0f} env-steps/s "
           f"({min(rates):,.0f}-{max(rates):,.0f})", flush=True)
+  pool.shutdown()
   return 0
 
 

@@ -108,7 +108,8 @@ def sweep(tasks: Sequence[str], policies: Sequence[str], seeds: Sequence[int], f
         keys = np.tile(np.asarray(keys), (len(levels), 1))  # same episodes at every level
         order = device_local_order(episodes, len(levels), len(ev.devices))
         per_ep = ev.run(keys[order], frag[order])
-        per_ep = {k: v[np.argsort(order)] for k, v in per_ep.items()}  # back to level-major
+        back = np.argsort(order)  # back to level-major
+        per_ep = {k: v[back] for k, v in per_ep.items()}
         for i, f in enumerate(levels):
           sl = slice(i * episodes, (i + 1) * episodes)
           m = E.metrics({k: v[sl] for k, v in per_ep.items()}, env.entity_names, safe_threshold)
