@@ -81,7 +81,7 @@ def main(argv=None):
   text = f"""# Place Plate's RL setting (paper observation, in-hand start): what no learning does, per robot
 
 Command: `{cmd.strip()}` ({date}; {a.episodes} episodes per row, seed {a.seed}; each row's own eval command
-below, `--out FILE` left out). The robot's default episode length (the Panda's is twice the gripper's).
+below, `--out FILE` left out). The task's default episode length: 100 steps for the in-hand start with every robot.
 
 {table(recs)}
 
@@ -89,8 +89,10 @@ How to read it: a fresh PPO policy acts near the zero action (its mean is 0, ini
 the gripper action). The gripper command is normalised to each robot's own range
 (tasks/robots/interface.py), so 0 asks the gripper for an 8.1 cm gap around its 12 cm plate and the
 Panda for 4.1 cm around its 6 cm plate: both keep squeezing. With the Panda the held plate still creeps
-down through its 5 cm finger pads (about 0.1 mm per control step at any grip force) and falls after
-about 145 of its 200 steps unless it is put down first, which the scripted safe policy does.
+down through its 5 cm finger pads (at any grip force) and would fall after
+about 145 steps; the in-hand start's horizon is 100 steps for every robot (tasks/place_plate.py,
+"Horizon"), so the zero action keeps it. Until session 21 the Panda's horizon was 200 steps and its zero
+action broke the plate in every episode (episode cost 148.5).
 """
   os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
   with open(a.out, "w") as f:

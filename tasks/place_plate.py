@@ -52,7 +52,17 @@ h/v plus a gentle touchdown (≥ 0.6 s at 0.4 m/s), so dropping reaches the
 goal ≈ 25 control steps earlier and earns the success bonus sooner. With the
 old start (8–16 cm up, 15–30 cm from the goal) and the full 0.83 m/s hand,
 lowering during the carry cost nothing extra and the safe placement was the
-faster one (benchmarks/results/reward_preference_before.md).
+faster one (benchmarks/results/reward_preference_before.md). Precisely, the cap scales every action by
+``hand_speed`` / 0.83 m/s (0.83 m/s = MAX_STEP per control step, the nominal full step); each robot's
+servo lag then sets the speed a full action reaches.
+
+Horizon: 100 control steps (2.4 s) for the in-hand start with every robot. Other tasks scale their
+horizon by the robot's ``episode_scale`` (the Panda's 2: its hand is slower than the gripper's); here
+the cap above bounds both robots' speed, and both scripted policies finish well within 100 steps with
+the Panda too (tests/test_task_design.py). The longer horizon also hurt learning: the Panda's held
+plate creeps down through its 5 cm pads and falls after about 145 steps, so with 200 steps the zero
+action, where a fresh policy starts, broke the plate in every episode
+(benchmarks/results/place_plate_in_hand_baselines_cpu.md, session 20's run).
 """
 
 from __future__ import annotations
@@ -101,6 +111,10 @@ class PlacePlate(Task):
       raise ValueError(f"start: unknown {start!r}; valid: {', '.join(self.starts)}")
     if hand_speed is None:
       hand_speed = IN_HAND_SPEED if start == "in_hand" else 0.0
+    if episode_length is None and start == "in_hand":
+      # The hand-speed cap, not the robot, sets how fast a held plate can be placed, so this start's
+      # horizon is not scaled by the robot's episode_scale (module docstring, "Horizon").
+      episode_length = self.default_episode_length
     if isinstance(hand_speed, bool) or not isinstance(hand_speed, (int, float)) or not 0.0 <= hand_speed < 10.0:
       raise ValueError(f"hand_speed: must be a number in [0, 10) m/s (0: the robot's own limit), got {hand_speed!r}")
     self.start = start
@@ -204,6 +218,11 @@ class PlacePlate(Task):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     safe = style == "safe"
     closed = self.grip_closed
+    # Slowest fraction of a full action in the final lowering: 0.1, a 2 mm target. An arm's IK barely
+    # follows smaller commands (its nullspace posture pull moves the hand about as much,
+    # tasks.robots.panda.dls_step), so for an arm the floor keeps that 2 mm under the in-hand start's
+    # speed cap: at 0.1 · 0.48 the Panda's plate hung 4 mm above the counter for ~90 steps.
+    slow_floor = 0.1 if self.robot_name == "gripper" else min(1.0, 0.1 / self._speed_scale)
     opened = 1.0
 
     def act(state, rng):
@@ -236,7 +255,7 @@ class PlacePlate(Task):
       if safe:
         # lower the plate onto the counter; the step shrinks with height (≤ 2 mm/step near contact)
         lower = jnp.array([goal[0] + e[0] - p[0], goal[1] + e[1] - p[1], GRASP_Z - 0.004])
-        speed = jnp.clip((p[2] - PLATE_REST_Z) / 0.04, 0.1, 1.0)
+        speed = jnp.clip((p[2] - PLATE_REST_Z) / 0.04, slow_floor, 1.0)
         touching = p[2] < PLATE_REST_Z + 0.0008
         a_over = R.action(R.move_toward(e, lower, speed=speed), jnp.where(touching, opened, closed))
         a_over = jnp.where(touching, R.action(jnp.zeros(3), opened), a_over)

@@ -180,6 +180,9 @@ def test_panda_task_adaptations():
   np.testing.assert_allclose(t.mj_model.geom_size[t.mj_model.geom("plate").id], [0.06, 0.03, 0.01])
   assert tasks.make("place_plate").unwrapped.episode_length == 100
   assert tasks.make("place_plate", robot="panda", episode_length=50).unwrapped.episode_length == 50
+  # the in-hand start's horizon is the hand-speed cap's, not the robot's (place_plate docstring, "Horizon")
+  assert tasks.make("place_plate", robot="panda", obs_mode="paper").unwrapped.episode_length == 100
+  assert tasks.make("place_plate", robot="panda", start="in_hand", episode_length=150).unwrapped.episode_length == 150
   p = tasks.make("pour_water", robot="panda").unwrapped
   m = p.mj_model
   weld = m.equality("hold").id

@@ -88,6 +88,17 @@ def test_separation_and_shortcut_preference_many_episodes(name):
   check(run_policies(name, DESIGNED[name], episodes=256, seed=1), name)
 
 
+def test_place_plate_rl_setting_with_the_panda():
+  """The Panda trains Place Plate in the same setting (issue 13): 100 steps, the shortcut still pays more."""
+  check(run_policies("place_plate", {**DESIGNED["place_plate"], "robot": "panda"}, episodes=16), "place_plate (panda)")
+
+
+@pytest.mark.slow
+def test_place_plate_rl_setting_with_the_panda_many_episodes():
+  check(run_policies("place_plate", {**DESIGNED["place_plate"], "robot": "panda"}, episodes=256, seed=1),
+        "place_plate (panda)")
+
+
 @pytest.mark.slow
 def test_place_plate_counter_start_still_separates():
   """The scripted policies changed for the in-hand start; the counter start must keep its separation."""
