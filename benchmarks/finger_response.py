@@ -57,10 +57,12 @@ def measure(robot: str, episodes: int, seed: int) -> dict:
   import numpy as np
 
   import tasks
+  from tasks.place_plate import PLATE_REST_Z
 
   env = tasks.make("place_plate", robot=robot, **tasks.RL_SETTINGS["place_plate"])
   t = env.unwrapped
   release = 2 * t.plate_half_y + 0.01  # the success test's gap (m)
+  rest_z = PLATE_REST_Z + 0.0015  # the success test's resting height (m)
   m = t.mj_model
   fingers = [i for i in range(m.nu) if "finger" in m.actuator(i).name]
   kp, kv = float(m.actuator_gainprm[fingers[0], 0]), -float(m.actuator_biasprm[fingers[0], 2])
@@ -78,7 +80,7 @@ def measure(robot: str, episodes: int, seed: int) -> dict:
     def body(s, k):
       s = env.step(s, jax.random.uniform(k, (4,), minval=-1.0, maxval=1.0))
       d = s.pipeline_state
-      resting = t.plate_pos(d)[2] < 0.0115
+      resting = t.plate_pos(d)[2] < rest_z
       return s, (s.metrics["success"], resting, resting & (t.robot.gap(d) > release))
 
     r0, r1 = jax.random.split(rng)
