@@ -61,13 +61,14 @@ import math
 import os
 import shlex
 import sys
+import tempfile
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cache"))
 
-from mjx_damage import io, runtime  # noqa: E402
+from mjx_damage import io, outputs, runtime  # noqa: E402
 
 METHODS = ("task_only", "penalty", "lagrangian", "pid", "lagrangian_curriculum", "pid_curriculum", "paper",
            "paper_task_only")
@@ -166,7 +167,9 @@ def parse(argv):
                       "(E[tanh(u)] from 32 draws; train.networks.policy_apply); the first is the row's headline, "
                       "the others are kept per seed beside it")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
-  p.add_argument("--work-dir", default=None, help="run directories (default /tmp/rl_multiseed)")
+  p.add_argument("--work-dir", default=None,
+                 help="folder of the run directories, one per method (default: a new temporary folder per call, "
+                      "so two calls at once never share a run)")
   p.add_argument("--resume", action="store_true",
                  help="continue each method's run in --work-dir from its checkpoint for another --budget-seconds "
                       "(a run longer than one device call); the row lists every call's command")
@@ -231,6 +234,11 @@ def parse(argv):
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
   if args.resume and not args.work_dir:
     p.error("--resume: give --work-dir, the folder of the runs to continue")
+  if args.work_dir and not args.resume:
+    for name in args.methods:
+      if outputs.exists(os.path.join(args.work_dir, name)):
+        p.error(f"--work-dir: {os.path.join(args.work_dir, name)} already holds a run; pass --resume to continue "
+                "it, or choose another --work-dir")
   return args
 
 
@@ -486,7 +494,7 @@ def main(argv=None) -> int:
   slug, device = device_info()
   task_slug = args.task.rsplit(":", 1)[-1].lower()
   base = os.path.join(args.results_dir, f"rl_{task_slug}_{slug}" + (f"_{args.tag}" if args.tag else ""))
-  work = args.work_dir or os.path.join("/tmp", "rl_multiseed", f"{task_slug}_{slug}")
+  work = args.work_dir or tempfile.mkdtemp(prefix=f"rl_multiseed_{task_slug}_{slug}_")
   command = " ".join(shlex.quote(a) for a in ["benchmarks/rl_multiseed.py"]
                      + list(sys.argv[1:] if argv is None else argv))
   payload = {"device": device, "jax": jax.__version__, "task": args.task, "eval_episodes": args.eval_episodes,

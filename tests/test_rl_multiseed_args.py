@@ -118,3 +118,27 @@ def test_a_diverged_method_is_reported_and_the_others_still_run(monkeypatch, tmp
   assert status == 1 and ran == ["penalty", "pid"]
   assert "penalty: training diverged" in err and "diverged (no row): penalty, pid" in err
   assert not list(tmp_path.glob("*.md"))  # no table of nothing
+
+
+def test_a_run_already_in_work_dir_is_refused_without_resume(tmp_path, capsys):
+  (tmp_path / "penalty").mkdir()
+  (tmp_path / "penalty" / "config.json").write_text("{}")
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(["--methods", "penalty", "--work-dir", str(tmp_path)])
+  assert f"--work-dir: {tmp_path / 'penalty'} already holds a run" in capsys.readouterr().err
+  assert rl_multiseed.parse(["--methods", "penalty", "--work-dir", str(tmp_path), "--resume"]).resume
+
+
+def test_calls_without_work_dir_never_share_run_directories(monkeypatch, tmp_path):
+  """Two calls at once (say one per GPU) once shared /tmp/rl_multiseed/<task>_<device>: the second
+  overwrote the first's checkpoints before it was scored."""
+  works = []
+
+  def record(name, args, command, work):
+    works.append(work)
+    raise TrainingDiverged("stop here")
+
+  monkeypatch.setattr(rl_multiseed, "run_method", record)
+  for _ in range(2):
+    rl_multiseed.main(["--methods", "penalty", "--results-dir", str(tmp_path)])
+  assert len(set(works)) == 2 and all(os.path.isdir(w) and not os.listdir(w) for w in works)
