@@ -8,7 +8,8 @@ command. Per robot (in-hand start, paper observation, 100-step horizon), one com
   the gap passes the success test's release gap (plate width + 1 cm);
 * under uniform random actions (``--episodes`` episodes): completion, and the share of steps with the
   plate resting on the counter on which the gap is past the release gap;
-* the finger servo's gains (kp, kv) read from the compiled model, so each row says what it measured.
+* the finger servo's gains (kp, kv) and whether one joint equality couples the two fingers, read from
+  the compiled model, so each row says what it measured.
 
     python benchmarks/finger_response.py [--robots gripper,panda] [--episodes 128] [--seed 0] \
         [--out benchmarks/results/finger_response_cpu.md]
@@ -54,6 +55,7 @@ def parse(argv):
 def measure(robot: str, episodes: int, seed: int) -> dict:
   import jax
   import jax.numpy as jnp
+  import mujoco
   import numpy as np
 
   import tasks
@@ -66,6 +68,10 @@ def measure(robot: str, episodes: int, seed: int) -> dict:
   m = t.mj_model
   fingers = [i for i in range(m.nu) if "finger" in m.actuator(i).name]
   kp, kv = float(m.actuator_gainprm[fingers[0], 0]), -float(m.actuator_biasprm[fingers[0], 2])
+  # one drive for both fingers (the Panda hand): an active joint equality between the two finger joints
+  finger_joints = {int(m.actuator_trnid[i, 0]) for i in fingers}
+  coupled = any(m.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and m.eq_active0[e]
+                and {int(m.eq_obj1id[e]), int(m.eq_obj2id[e])} == finger_joints for e in range(m.neq))
 
   def open_gaps(rng):
     acts = jnp.concatenate([jnp.zeros((OPEN_AFTER, 4)), jnp.tile(jnp.array([0.0, 0.0, 0.0, 1.0]), (OPEN_STEPS, 1))])
@@ -91,7 +97,7 @@ def measure(robot: str, episodes: int, seed: int) -> dict:
   succ, resting, open_resting = (np.asarray(x) for x in jax.jit(jax.vmap(random_episode))(
       jax.random.split(jax.random.PRNGKey(seed + 1), episodes)))
   return {
-      "robot": robot, "finger_kp": kp, "finger_kv": kv, "release_gap_m": release,
+      "robot": robot, "finger_kp": kp, "finger_kv": kv, "fingers_coupled": coupled, "release_gap_m": release,
       "open_steps": int(past[0]) + 1 if past.size else None, "gap_after_open_m": [round(float(g), 4) for g in gaps],
       "random_completion": float(succ.max(axis=1).mean()), "random_resting_steps": int(resting.sum()),
       "random_open_share_resting": float(open_resting.sum() / max(resting.sum(), 1)), "episodes": episodes,
@@ -112,13 +118,14 @@ def main(argv=None) -> int:
       "Open steps: control steps of a full open command (after 5 zero-action steps) until the gap passes the "
       "success test's release gap (plate width + 1 cm). Random: uniform random actions; 'open while resting' = "
       "share of the steps with the plate resting on the counter on which the hand is open past that gap.", "",
-      "| robot | finger kp (N/m) | finger kv (N·s/m) | release gap (cm) | open steps | gap after 1, 2, 3 open steps (cm) "
+      "| robot | finger kp (N/m) | finger kv (N·s/m) | fingers coupled | release gap (cm) | open steps | gap after 1, 2, 3 open steps (cm) "
       "| random: completion | random: open while resting | episodes × steps |",
-      "|---|---|---|---|---|---|---|---|---|",
+      "|---|---|---|---|---|---|---|---|---|---|",
   ]
   for r in rows:
     g = ", ".join(f"{100 * x:.2f}" for x in r["gap_after_open_m"][:3])
-    lines.append(f"| {r['robot']} | {r['finger_kp']:g} | {r['finger_kv']:g} | {100 * r['release_gap_m']:.1f} "
+    lines.append(f"| {r['robot']} | {r['finger_kp']:g} | {r['finger_kv']:g} "
+                 f"| {'yes' if r['fingers_coupled'] else 'no'} | {100 * r['release_gap_m']:.1f} "
                  f"| {r['open_steps'] if r['open_steps'] is not None else f'> {OPEN_STEPS}'} | {g} "
                  f"| {100 * r['random_completion']:.1f} % | {100 * r['random_open_share_resting']:.1f} % "
                  f"| {r['episodes']} × {r['episode_length']} |")

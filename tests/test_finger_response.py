@@ -30,6 +30,6 @@ def test_gripper_row(tmp_path):
   assert finger_response.main(["--robots", "gripper", "--episodes", "2", "--out", str(out)]) == 0
   row = json.loads((tmp_path / "fr.json").read_text())["rows"][0]
   # the gripper's servo (tasks/robots/gripper.xml) clears its 12 cm plate by 1 cm in one open step
-  assert (row["finger_kp"], row["finger_kv"], row["open_steps"]) == (400.0, 12.0, 1)
+  assert (row["finger_kp"], row["finger_kv"], row["fingers_coupled"], row["open_steps"]) == (400.0, 12.0, False, 1)
   assert row["release_gap_m"] == pytest.approx(0.13) and 0.0 <= row["random_completion"] <= 1.0
-  assert "| gripper | 400 | 12 | 13.0 | 1 |" in out.read_text()
+  assert "| gripper | 400 | 12 | no | 13.0 | 1 |" in out.read_text()
