@@ -14,7 +14,6 @@ ENTITY = np.array([0, 1, 1, 1, 1, 1, 1])
 
 @pytest.mark.parametrize("argv, message", [
     (["--tasks", "no_such_task"], "tasks: unknown task(s) no_such_task"),
-    (["--tasks", "navigate_and_pick"], "robot: navigate_and_pick run(s) without 'panda'"),
     (["--tasks", "pick_egg", "pick_egg"], "tasks: listed twice: pick_egg"),
     (["--episodes", "0"], "episodes: must be a positive integer"),
     (["--threshold", "nan"], "threshold: must be in (0, 100]"),
@@ -28,7 +27,7 @@ def test_bad_arguments_name_the_field(argv, message, capsys):
 
 def test_default_tasks_are_those_the_panda_runs():
   chosen = P.check_args(P.build_parser().parse_args([]))
-  assert "place_plate" in chosen and "navigate_and_pick" not in chosen
+  assert chosen == P.tasks.select(None, "panda") and "navigate_and_pick" in chosen  # on its mobile base
 
 
 def test_arm_links_are_the_panda_links_of_the_agent():

@@ -233,8 +233,8 @@ def test_panda_task_adaptations():
 
 
 @pytest.mark.parametrize("name", ["navigate_and_pick"])
-def test_gripper_only_tasks_refuse_other_robots_before_compiling(name):
-  # a mobile base; the refusal names the field and the robots
-  assert tasks.describe(name)["robots"] == ["gripper"]
-  with pytest.raises(ValueError, match=f"robot: task '{name}' supports gripper only, got 'panda'"):
-    tasks.make(name, robot="panda")
+def test_mobile_base_tasks_refuse_the_wrist_panda_before_compiling(name):
+  # a mobile base (the gripper's slides, the Panda's platform); the refusal names the field and the robots
+  assert tasks.describe(name)["robots"] == ["gripper", "panda"]
+  with pytest.raises(ValueError, match=f"robot: task '{name}' supports gripper, panda only, got 'panda_wrist'"):
+    tasks.make(name, robot="panda_wrist")

@@ -14,7 +14,7 @@ import tasks  # noqa: E402
 
 
 @pytest.mark.parametrize("argv, field", [
-    (["--robot", "panda", "--tasks", "navigate_and_pick"], "robot"),
+    (["--robot", "panda_wrist", "--tasks", "navigate_and_pick"], "robot"),
     (["--tasks", "place_plate,nope"], "tasks"),
     (["--tasks", "place_plate,place_plate"], "tasks"),
     (["--robot", "ur5"], "robot"),
@@ -31,5 +31,5 @@ def test_default_tasks_are_those_the_robot_runs(monkeypatch):
   ran = []
   monkeypatch.setattr(scripted_policies, "run_task", lambda name, *a, **k: ran.append(name) or [])
   monkeypatch.setattr(scripted_policies, "write", lambda *a, **k: None)
-  assert scripted_policies.main(["--robot", "panda", "--name", "unused_test_stem"]) == 0
-  assert ran == tasks.select(None, "panda") and "navigate_and_pick" not in ran
+  assert scripted_policies.main(["--robot", "panda_wrist", "--name", "unused_test_stem"]) == 0
+  assert ran == tasks.select(None, "panda_wrist") and "navigate_and_pick" not in ran

@@ -92,7 +92,7 @@ def test_worker_argv_drops_only_the_per_worker_flags():
 
 @pytest.mark.parametrize("argv,field", [(["--robot", "ur5"], "--robot"), (["--workers", "0"], "--workers"),
                                         (["--robot", "gripper", "--tasks", "nope"], "--tasks"),
-                                        (["--robot", "panda", "--tasks", "navigate_and_pick"], "--tasks"),
+                                        (["--robot", "panda_wrist", "--tasks", "navigate_and_pick"], "--tasks"),
                                         (["--tasks", ","], "--tasks")])
 def test_soak_cli_names_the_bad_field(argv, field, capsys):
   with pytest.raises(SystemExit) as e:

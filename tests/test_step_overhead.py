@@ -13,7 +13,7 @@ so = load_benchmark("step_overhead")
 
 @pytest.mark.parametrize("argv,field", [
     (["--robot", "ur5"], "--robot"),
-    (["--robot", "panda", "--tasks", "navigate_and_pick"], "--tasks"),
+    (["--robot", "panda_wrist", "--tasks", "navigate_and_pick"], "--tasks"),
     (["--precompile-workers", "-1"], "--precompile-workers"),
     (["--variants", "task,warp"], "--variants"),
     (["--envs", "0"], "--envs"),

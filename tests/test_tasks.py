@@ -79,11 +79,12 @@ def test_select_checks_task_lists_for_a_robot():
   import tasks as T
   assert T.select(None, "gripper") == T.names()
   panda = T.select(None, "panda")
-  assert "place_plate" in panda and "navigate_and_pick" not in panda
+  assert panda == T.names()  # navigate_and_pick on the Panda's mobile base
+  assert "navigate_and_pick" not in T.select(None, "panda_wrist")
   assert T.select(["pick_egg", "place_plate"], "panda") == ["pick_egg", "place_plate"]
   for chosen, robot, message in ((["nope"], "gripper", "tasks: unknown task(s) nope"),
                                  (["pick_egg", "pick_egg"], "gripper", "tasks: listed twice: pick_egg"),
-                                 (["navigate_and_pick"], "panda", "robot: navigate_and_pick run(s) without 'panda'"),
+                                 (["navigate_and_pick"], "panda_wrist", "robot: navigate_and_pick run(s) without 'panda_wrist'"),
                                  (None, "unicycle", "robot: unknown robot 'unicycle'")):
     with pytest.raises(ValueError) as e:
       T.select(chosen, robot)

@@ -1,7 +1,7 @@
 """Robots of the task suite, one module + MJCF each, behind :class:`tasks.robots.interface.Robot`.
 
 * ``gripper`` — the floating parallel-jaw gripper (x/y/z slides); the default.
-* ``panda`` — Franka Emika Panda, fixed base, differential-IK control of the same
+* ``panda`` — Franka Emika Panda, fixed base (on a mobile platform in navigate_and_pick), differential-IK control of the same
   ``[Δx, Δy, Δz, gripper]`` action.
 * ``panda_wrist`` — the Panda with the 7-D action ``[Δpos, Δrot, gripper]``.
 """

@@ -24,6 +24,16 @@ Control, once per control step inside the jitted step (:meth:`Panda.ctrl`):
 
 Damage: every arm link, the hand and both fingers are links of entity ``agent``.
 
+Mobile base (navigation tasks): :func:`add_mobile_base` turns ``panda_link0`` into a
+low omnidirectional platform on planar joints ``panda_base_x/y/yaw`` (first in
+``qpos``, so the arm follows at ``qpos[3:10]``, the fingers at ``qpos[10:12]``; the
+base's servos are actuators 9–11). :class:`Panda` finds the joints in the compiled
+model and then drives the base too: each control step the base's target is the new
+grip-point target minus ``MOBILE_REACH`` along its heading (the heading is held), at
+most ``BASE_SPEED``, and the arm's IK solves for the grip-point target from where the
+base is sent, so the base does the travel and the arm the height and what the base
+has not yet covered.
+
 Carrying a welded object (prepare_breakfast's tray, move_glass_of_water's glass):
 :func:`weld_to_hand` re-attaches the scene's holder weld to ``panda_hand`` at the
 grip point, and :class:`PandaHolding` keeps the fingers on the object and gives the
@@ -75,6 +85,20 @@ NULL_GAIN = 0.1  # fraction of the posture error removed per control step, in th
 NULL_DAMPING = 0.005  # m, the posture projector's own damping where a robot class asks for it (PandaHolding)
 MAX_ROT = 0.1  # rad per control step for the wrist action (PandaWrist)
 IK_ITERS = 60  # DLS iterations of the reset-time IK (converges to < 0.1 mm in the workspace)
+
+BASE_JOINTS = ("panda_base_x", "panda_base_y", "panda_base_yaw")
+BASE_ACTUATORS = BASE_JOINTS
+BASE_HALF = (0.16, 0.15, 0.05)  # m, the platform box's half sizes (32 × 30 cm, 10 cm tall)
+BASE_TOP = 0.12  # m, platform top above the floor = link0's height (2 cm ground clearance)
+LINK0_AHEAD = 0.08  # m, link0 ahead of the platform's centre
+MOBILE_REACH = 0.6  # m, link0 to grip point along the heading, in the base's plane (the arm half stretched)
+MOBILE_REACH_Z = (-0.15, 0.5)  # m, grip-point heights the mobile arm accepts, relative to link0
+BASE_SPEED = 1.0  # m/s, the platform's top speed (the hand's is MAX_STEP per control step, ≈ 0.83 m/s)
+BASE_MASS = 15.0  # kg
+# Base servos, the arm's convention (kp ≈ 83²·M, kv = 0.024·kp) for the platform + arm (≈ 33 kg;
+# yaw ≈ 2 kg·m² with the arm half stretched); force limits of a small electric base.
+BASE_KP, BASE_KV, BASE_FORCE = 2.3e5, 5.5e3, 600.0  # N/m, N·s/m, N
+YAW_KP, YAW_KV, YAW_TORQUE = 1.4e4, 330.0, 150.0  # N·m/rad, N·m·s/rad, N·m
 
 ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
 FINGER_JOINTS = ("panda_finger_left", "panda_finger_right")
@@ -191,10 +215,16 @@ class Panda(Robot):
   null_damping = None  # the posture projector's own damping μ (dls_step); None: the task step's λ
 
   def __init__(self, m: mujoco.MjModel, control_dt: float):
-    qadr = [int(m.jnt_qposadr[m.joint(n).id]) for n in ARM_JOINTS + FINGER_JOINTS]
-    vadr = [int(m.jnt_dofadr[m.joint(n).id]) for n in ARM_JOINTS + FINGER_JOINTS]
-    act = [m.actuator(n).id for n in ACTUATORS]
-    if qadr != list(range(9)) or vadr != list(range(9)) or act != list(range(9)):
+    names = [m.joint(j).name for j in range(m.njnt)]
+    self.mobile = all(n in names for n in BASE_JOINTS)  # add_mobile_base ran on the scene
+    self.qa = 3 if self.mobile else 0  # qpos/qvel address of panda_joint1
+    self.nq = self.nu = 9 + self.qa
+    self.proprio_size = 15 + self.qa  # the mobile base adds its x, y (m) and yaw (rad)
+    joints = (BASE_JOINTS if self.mobile else ()) + ARM_JOINTS + FINGER_JOINTS
+    qadr = [int(m.jnt_qposadr[m.joint(n).id]) for n in joints]
+    vadr = [int(m.jnt_dofadr[m.joint(n).id]) for n in joints]
+    act = [m.actuator(n).id for n in ACTUATORS + (BASE_ACTUATORS if self.mobile else ())]
+    if qadr != list(range(self.nq)) or vadr != list(range(self.nq)) or act != list(range(self.nu)):
       raise ValueError("scene: robot.xml must be included before any other joint/actuator "
                        f"(got qpos adr {qadr}, dof adr {vadr}, actuators {act})")
     rng = np.array([m.jnt_range[m.joint(n).id] for n in ARM_JOINTS])
@@ -210,6 +240,9 @@ class Panda(Robot):
     self.dq_max = (V_MAX * self.control_dt).astype(np.float32)  # rad per control step
     self.q_lo = (Q_LO + LIMIT_MARGIN).astype(np.float32)
     self.q_hi = (Q_HI - LIMIT_MARGIN).astype(np.float32)
+    self.base_step = np.float32(BASE_SPEED * self.control_dt)  # m per control step
+    if self.mobile:  # no policies were written with the shared projector's creep here (dls_step)
+      self.null_damping = NULL_DAMPING
 
   @classmethod
   def place(cls, m: mujoco.MjModel, mount) -> None:
@@ -219,6 +252,13 @@ class Panda(Robot):
     m.body_quat[b] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
 
   def workspace(self, lo, hi):
+    if self.mobile:  # the base drives anywhere on the floor: only the arm's heights bound the box
+      z = self.base_pos[2] + np.asarray(MOBILE_REACH_Z)
+      lo, hi = np.array(lo, np.float32), np.array(hi, np.float32)
+      lo[2], hi[2] = max(lo[2], z[0]), min(hi[2], z[1])
+      if lo[2] > hi[2]:
+        raise ValueError(f"workspace: the task's heights do not meet the mobile panda's reach {z}")
+      return lo, hi
     corners = np.array(np.meshgrid(*zip(*REACH_BOX), indexing="ij")).reshape(3, -1).T
     world = corners @ self.base_rot.T + self.base_pos
     rlo, rhi = world.min(0), world.max(0)
@@ -228,36 +268,56 @@ class Panda(Robot):
     return lo.astype(np.float32), hi.astype(np.float32)
 
   # -- state readers ------------------------------------------------------------------
-  def kinematics(self, q):
-    """(grip point f32[3], hand rotation f32[3, 3], Jacobian f32[6, 7]) at arm angles ``q`` f32[7]."""
-    return fk(q, self.base_pos, self.base_rot)
+  def base_pose(self, qpos):
+    """link0's world pose (pos f32[3] m, rot f32[3, 3]): the mount, moved by the base joints if mobile."""
+    if not self.mobile:
+      return jnp.asarray(self.base_pos), jnp.asarray(self.base_rot)
+    b = qpos[0:3]
+    rot = jnp.asarray(self.base_rot)
+    return rot @ jnp.stack([b[0], b[1], 0.0 * b[0]]) + self.base_pos, rot @ _rot_z(b[2])
+
+  def kinematics(self, q, base=None):
+    """(grip point f32[3], hand rotation f32[3, 3], Jacobian f32[6, 7]) at arm angles ``q`` f32[7], with
+    link0 at ``base`` = (pos, rot) (default: the mount)."""
+    return fk(q, *((self.base_pos, self.base_rot) if base is None else base))
+
+  def _fk(self, qpos):
+    return self.kinematics(qpos[self.qa:self.qa + 7], self.base_pose(qpos))
 
   def eef_pos(self, d) -> jax.Array:
-    return self.kinematics(d.qpos[0:7])[0]
+    return self._fk(d.qpos)[0]
 
   def eef_vel(self, d) -> jax.Array:
-    return self.kinematics(d.qpos[0:7])[2][0:3] @ d.qvel[0:7]
+    p, _, jac = self._fk(d.qpos)
+    v = jac[0:3] @ d.qvel[self.qa:self.qa + 7]
+    if self.mobile:  # + the platform's translation and its turn about the vertical
+      w = d.qvel[0:3]
+      v = v + jnp.asarray(self.base_rot) @ jnp.stack([w[0], w[1], 0.0 * w[0]])
+      v = v + jnp.cross(jnp.stack([0.0 * w[2], 0.0 * w[2], w[2]]), p - self.base_pose(d.qpos)[0])
+    return v
 
   def hand_rot(self, d) -> jax.Array:
     """Hand rotation f32[3, 3] (columns: hand x, finger axis, approach direction)."""
-    return self.kinematics(d.qpos[0:7])[1]
+    return self._fk(d.qpos)[1]
 
   def finger_q(self, d):
-    return d.qpos[7:9], d.qvel[7:9]
+    return d.qpos[self.qa + 7:self.qa + 9], d.qvel[self.qa + 7:self.qa + 9]
 
   def proprio(self, d) -> jax.Array:
-    q = d.qpos[0:7]
+    q = d.qpos[self.qa:self.qa + 7]
     qn = (2.0 * q - (Q_HI + Q_LO)) / (Q_HI - Q_LO)
-    return jnp.concatenate([super().proprio(d), qn.astype(q.dtype)])
+    return jnp.concatenate([super().proprio(d), qn.astype(q.dtype), d.qpos[0:self.qa]])
 
   # -- control ----------------------------------------------------------------------------
   def _r_target(self, r, a):
     return jnp.asarray(self.r_des)
 
-  def arm_targets(self, q, a, lo, hi):
-    """Joint position targets f32[7] for arm angles ``q`` f32[7] and sanitized action ``a``."""
-    p, r, jac = self.kinematics(q)
-    dp = jnp.clip(p + a[0:3] * MAX_STEP, lo, hi) - p
+  def arm_targets(self, q, a, lo, hi, base=None, target=None):
+    """Joint position targets f32[7] for arm angles ``q`` f32[7] and sanitized action ``a``; ``base``
+    (link0's pose the arm is solved from; default the mount) and ``target`` (grip-point target f32[3];
+    default the grip point moved by the action) for the mobile base."""
+    p, r, jac = self.kinematics(q, base)
+    dp = (jnp.clip(p + a[0:3] * MAX_STEP, lo, hi) if target is None else target) - p
     err = jnp.concatenate([dp, ROT_WEIGHT * rot_err(r, self._r_target(r, a))])
     jw = jac.at[3:].multiply(ROT_WEIGHT)
     dq = dls_step(q, jw, err, jnp.asarray(Q_READY, q.dtype), NULL_GAIN, null_damping=self.null_damping)
@@ -267,22 +327,39 @@ class Panda(Robot):
   def _assemble(self, q_arm, fingers):
     return jnp.concatenate([q_arm[0:3], fingers, q_arm[3:7]])
 
+  def base_targets(self, d, a, lo, hi):
+    """Mobile base: (base joint targets f32[3], link0's pose there, grip-point target f32[3]). The grip
+    point's target is the measured grip point moved by the action; the base is sent toward where that
+    target lies ``MOBILE_REACH`` ahead of link0 (heading held), at most ``base_step`` per control step."""
+    target = jnp.clip(self.eef_pos(d) + a[0:3] * MAX_STEP, lo, hi)
+    b = d.qpos[0:3]
+    rel = jnp.asarray(self.base_rot).T @ (target - self.base_pos)  # mount frame
+    want = jnp.stack([rel[0] - MOBILE_REACH, rel[1]]) - b[0:2]
+    step = want * jnp.minimum(1.0, self.base_step / jnp.maximum(jnp.linalg.norm(want), 1e-9))
+    b_t = jnp.concatenate([b[0:2] + step, jnp.zeros((1,), b.dtype)])
+    return b_t, self.base_pose(b_t), target
+
   def ctrl(self, d, action, lo, hi, extra_ctrl=None) -> jax.Array:
     a = sanitize(action)
-    q_t = self.arm_targets(d.qpos[0:7], a, lo, hi)
-    return self._pad(self._assemble(q_t, self.finger_ctrl(a[-1])), extra_ctrl)
+    if not self.mobile:
+      q_t = self.arm_targets(d.qpos[0:7], a, lo, hi)
+      return self._pad(self._assemble(q_t, self.finger_ctrl(a[-1])), extra_ctrl)
+    b_t, base, target = self.base_targets(d, a, lo, hi)
+    q_t = self.arm_targets(d.qpos[3:10], a, lo, hi, base=base, target=target)
+    return self._pad(jnp.concatenate([self._assemble(q_t, self.finger_ctrl(a[-1])), b_t]), extra_ctrl)
 
-  def ik(self, pos, r_des=None, q0=None):
+  def ik(self, pos, r_des=None, q0=None, base=None):
     """Arm angles f32[7] putting the grip point at ``pos`` f32[3] with hand rotation ``r_des``
     (default: pointing down), by ``IK_ITERS`` undamped-rate DLS iterations from ``q0``
-    (default: the ready pose turned toward ``pos``)."""
+    (default: the ready pose turned toward ``pos``); link0 at ``base`` = (pos, rot) (default the mount)."""
     r_des = jnp.asarray(self.r_des if r_des is None else r_des)
+    bp, br = (self.base_pos, self.base_rot) if base is None else base
     if q0 is None:
-      rel = self.base_rot.T @ (pos - self.base_pos)
+      rel = jnp.asarray(br).T @ (pos - bp)
       q0 = jnp.asarray(Q_READY, jnp.float32).at[0].set(jnp.arctan2(rel[1], rel[0]))
 
     def it(q, _):
-      p, r, jac = self.kinematics(q)
+      p, r, jac = self.kinematics(q, base)
       err = jnp.concatenate([pos - p, ROT_WEIGHT * rot_err(r, r_des)])
       dq = dls_step(q, jac.at[3:].multiply(ROT_WEIGHT), err, q0, 0.05, damping=0.02)
       return jnp.clip(q + dq, self.q_lo, self.q_hi), None
@@ -291,13 +368,22 @@ class Panda(Robot):
     return q
 
   def home(self, qpos, pos, q_half=None) -> jax.Array:
-    q = self.ik(jnp.asarray(pos, jnp.float32))
+    pos = jnp.asarray(pos, jnp.float32)
+    base = None
+    if self.mobile:  # the platform MOBILE_REACH behind the grip point, heading as mounted
+      rel = jnp.asarray(self.base_rot).T @ (pos - self.base_pos)
+      b = jnp.stack([rel[0] - MOBILE_REACH, rel[1], 0.0 * rel[0]])
+      qpos = qpos.at[0:3].set(b)
+      base = self.base_pose(b)
+    q = self.ik(pos, base=base)
     q_half = self.finger_range[1] if q_half is None else q_half
     qf = jnp.clip(q_half, self.finger_range[0], self.finger_range[1])
-    return qpos.at[0:7].set(q).at[7:9].set(qf)
+    return qpos.at[self.qa:self.qa + 7].set(q).at[self.qa + 7:self.qa + 9].set(qf)
 
   def hold_ctrl(self, qpos, nu) -> jax.Array:
-    return jnp.zeros((nu,)).at[0:9].set(self._assemble(qpos[0:7], qpos[7:9]))
+    qa = self.qa
+    c = jnp.zeros((nu,)).at[0:9].set(self._assemble(qpos[qa:qa + 7], qpos[qa + 7:qa + 9]))
+    return c.at[9:9 + qa].set(qpos[0:qa])
 
 
 def _exp_so3(w):
@@ -347,6 +433,8 @@ class PandaHolding(Panda):
 
   def __init__(self, m: mujoco.MjModel, control_dt: float, hold_q: float):
     super().__init__(m, control_dt)
+    if self.mobile:
+      raise ValueError("scene: PandaHolding is for the fixed-base Panda (this scene has a mobile base)")
     self.hold_q = float(np.clip(hold_q, *self.finger_range))
 
   def ctrl(self, d, action, lo, hi, extra_ctrl=None) -> jax.Array:
@@ -371,3 +459,40 @@ def weld_to_hand(spec: mujoco.MjSpec, weld: str) -> None:
   eqs[0].name2 = "panda_hand"
   eqs[0].data[3:6] = (0.0, 0.0, GRIP_OFFSET)
   eqs[0].data[6:10] = quat
+
+
+def add_mobile_base(spec: mujoco.MjSpec) -> None:
+  """Put the scene's Panda (``robot.xml``, not yet compiled) on a mobile base: planar joints
+  ``panda_base_x``, ``panda_base_y`` (slides) and ``panda_base_yaw`` (hinge) on ``panda_link0``, a
+  32 × 30 × 10 cm platform under it (part of link0, so of entity ``agent``) with four visual wheels,
+  and one position servo per joint after the arm's (ctrl[9:12]). The task mounts link0 at the platform
+  top (``BASE_TOP``) with ``robot_mounts``; the joints move it from there.
+
+  The platform collides with movable objects only (conaffinity 4, like the shoulder links), so it
+  rides 2 cm over the floor without touching it and strikes whatever stands in its way. The scene
+  must have no actuators of its own (the robot's come first in ``ctrl``)."""
+  if len(spec.actuators) != len(ACTUATORS):
+    raise ValueError(f"scene: the mobile base needs a scene without actuators of its own "
+                     f"(found {len(spec.actuators) - len(ACTUATORS)})")
+  link0 = spec.body("panda_link0")
+  slide, hinge = mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE
+  for name, kind, axis, arm in ((BASE_JOINTS[0], slide, (1, 0, 0), 1.0), (BASE_JOINTS[1], slide, (0, 1, 0), 1.0),
+                                (BASE_JOINTS[2], hinge, (0, 0, 1), 0.5)):
+    j = link0.add_joint(name=name, type=kind, axis=axis, armature=arm, damping=10.0)
+    j.limited = mujoco.mjtLimited.mjLIMITED_FALSE
+  hx, hy, hz = BASE_HALF
+  centre = (-LINK0_AHEAD, 0.0, -hz)
+  link0.add_geom(name="panda_base", type=mujoco.mjtGeom.mjGEOM_BOX, pos=centre, size=BASE_HALF, mass=BASE_MASS,
+                 contype=2, conaffinity=4, rgba=(0.25, 0.25, 0.3, 1.0), group=1)
+  for sx in (-1, 1):
+    for sy in (-1, 1):
+      link0.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=(0.03, 0.012), mass=0.0,
+                     pos=(centre[0] + sx * (hx - 0.05), sy * (hy + 0.012), 0.03 - BASE_TOP),
+                     quat=(0.7071068, 0.7071068, 0.0, 0.0), contype=0, conaffinity=0, rgba=(0.1, 0.1, 0.1, 1.0),
+                     group=1)
+  gains = ((BASE_KP, BASE_KV, BASE_FORCE),) * 2 + ((YAW_KP, YAW_KV, YAW_TORQUE),)
+  for name, (kp, kv, f) in zip(BASE_ACTUATORS, gains):
+    a = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    a.set_to_position(kp=kp, kv=kv)
+    a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+    a.forcerange = (-f, f)
