@@ -288,12 +288,13 @@ class Panda(Robot):
     return self._fk(d.qpos)[0]
 
   def eef_vel(self, d) -> jax.Array:
-    p, _, jac = self._fk(d.qpos)
+    base = self.base_pose(d.qpos)
+    p, _, jac = self.kinematics(d.qpos[self.qa:self.qa + 7], base)
     v = jac[0:3] @ d.qvel[self.qa:self.qa + 7]
     if self.mobile:  # + the platform's translation and its turn about the vertical
       w = d.qvel[0:3]
       v = v + jnp.asarray(self.base_rot) @ jnp.stack([w[0], w[1], 0.0 * w[0]])
-      v = v + jnp.cross(jnp.stack([0.0 * w[2], 0.0 * w[2], w[2]]), p - self.base_pose(d.qpos)[0])
+      v = v + jnp.cross(jnp.stack([0.0 * w[2], 0.0 * w[2], w[2]]), p - base[0])
     return v
 
   def hand_rot(self, d) -> jax.Array:
@@ -327,14 +328,19 @@ class Panda(Robot):
   def _assemble(self, q_arm, fingers):
     return jnp.concatenate([q_arm[0:3], fingers, q_arm[3:7]])
 
+  def _base_under(self, pos):
+    """Mobile base: the base's x/y joint values f32[2] (mount frame) that put ``pos`` f32[3] (world)
+    ``MOBILE_REACH`` ahead of link0 at the mounted heading."""
+    rel = jnp.asarray(self.base_rot).T @ (pos - self.base_pos)
+    return jnp.stack([rel[0] - MOBILE_REACH, rel[1]])
+
   def base_targets(self, d, a, lo, hi):
     """Mobile base: (base joint targets f32[3], link0's pose there, grip-point target f32[3]). The grip
     point's target is the measured grip point moved by the action; the base is sent toward where that
     target lies ``MOBILE_REACH`` ahead of link0 (heading held), at most ``base_step`` per control step."""
     target = jnp.clip(self.eef_pos(d) + a[0:3] * MAX_STEP, lo, hi)
     b = d.qpos[0:3]
-    rel = jnp.asarray(self.base_rot).T @ (target - self.base_pos)  # mount frame
-    want = jnp.stack([rel[0] - MOBILE_REACH, rel[1]]) - b[0:2]
+    want = self._base_under(target) - b[0:2]
     step = want * jnp.minimum(1.0, self.base_step / jnp.maximum(jnp.linalg.norm(want), 1e-9))
     b_t = jnp.concatenate([b[0:2] + step, jnp.zeros((1,), b.dtype)])
     return b_t, self.base_pose(b_t), target
@@ -371,8 +377,7 @@ class Panda(Robot):
     pos = jnp.asarray(pos, jnp.float32)
     base = None
     if self.mobile:  # the platform MOBILE_REACH behind the grip point, heading as mounted
-      rel = jnp.asarray(self.base_rot).T @ (pos - self.base_pos)
-      b = jnp.stack([rel[0] - MOBILE_REACH, rel[1], 0.0 * rel[0]])
+      b = jnp.concatenate([self._base_under(pos), jnp.zeros((1,), pos.dtype)])
       qpos = qpos.at[0:3].set(b)
       base = self.base_pose(b)
     q = self.ik(pos, base=base)
