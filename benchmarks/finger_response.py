@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import shlex
 import sys
@@ -60,13 +59,14 @@ def measure(robot: str, episodes: int, seed: int) -> dict:
 
   import tasks
   from tasks.place_plate import PLATE_REST_Z
+  from tasks.robots.interface import FINGER_ACTUATORS
 
   env = tasks.make("place_plate", robot=robot, **tasks.RL_SETTINGS["place_plate"])
   t = env.unwrapped
   release = 2 * t.plate_half_y + 0.01  # the success test's gap (m)
   rest_z = PLATE_REST_Z + 0.0015  # the success test's resting height (m)
   m = t.mj_model
-  fingers = [i for i in range(m.nu) if "finger" in m.actuator(i).name]
+  fingers = list(FINGER_ACTUATORS)
   kp, kv = float(m.actuator_gainprm[fingers[0], 0]), -float(m.actuator_biasprm[fingers[0], 2])
   # one drive for both fingers (the Panda hand): an active joint equality between the two finger joints
   finger_joints = {int(m.actuator_trnid[i, 0]) for i in fingers}
@@ -109,6 +109,8 @@ def main(argv=None) -> int:
   a = parse(argv)
   import jax
 
+  from mjx_damage import io  # after parse: it puts the repo on sys.path
+
   rows = [measure(r, a.episodes, a.seed) for r in a.robots]
   cmd = "python benchmarks/finger_response.py " + shlex.join(argv if argv is not None else sys.argv[1:])
   when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -129,11 +131,8 @@ def main(argv=None) -> int:
                  f"| {r['open_steps'] if r['open_steps'] is not None else f'> {OPEN_STEPS}'} | {g} "
                  f"| {100 * r['random_completion']:.1f} % | {100 * r['random_open_share_resting']:.1f} % "
                  f"| {r['episodes']} × {r['episode_length']} |")
-  os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-  with open(a.out, "w") as f:
-    f.write("\n".join(lines) + "\n")
-  with open(os.path.splitext(a.out)[0] + ".json", "w") as f:
-    json.dump({"command": cmd.strip(), "date": when, "rows": rows}, f, indent=1)
+  io.write_text(a.out, "\n".join(lines) + "\n")
+  io.write_json(os.path.splitext(a.out)[0] + ".json", {"command": cmd.strip(), "date": when, "rows": rows}, indent=1)
   print("\n".join(lines))
   return 0
 
