@@ -6,8 +6,9 @@
    periods after a 0.5 s settle. Target (issue #13): RMS ≤ 5 mm.
 2. **Joint limits under random actions** (``checks.random_actions``): ``--envs`` ×
    ``--steps`` control steps of uniform random actions (each held 10 steps) for
-   ``panda`` and ``panda_wrist``; worst excess of any joint beyond its range over
-   every physics substep, and whether the state stayed finite. Target: ≤ 0.01 rad.
+   ``panda`` and ``panda_wrist``, once per seed of ``--limit-seeds``; worst excess of
+   any joint beyond its range over every physics substep, and whether the state
+   stayed finite. Target: ≤ 0.01 rad on every seed.
 3. **Compile time of one task step** (``--tasks``): ``jit(vmap(env.step))`` over 8
    envs, lowered and compiled from scratch (persistent cache off), Panda vs gripper;
    the 1-minute load average is recorded beside it (the CPU is shared).
@@ -20,7 +21,7 @@ Writes ``benchmarks/results/panda_ik_<backend>.json``.
 
 Usage::
 
-    .venv/bin/python benchmarks/panda_ik.py [--envs 20] [--steps 500] [--episodes 16] [--tasks place_plate]
+    .venv/bin/python benchmarks/panda_ik.py [--envs 20] [--steps 500] [--limit-seeds 0,1,2] [--episodes 16] [--tasks place_plate]
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ def joint_limits(robot: str, envs: int, steps: int, seed: int) -> dict:
   run = checks.random_actions(robot, envs, steps)
   t0 = time.perf_counter()
   worst, ok, _ = jax.block_until_ready(run(jax.random.PRNGKey(seed)))
-  return {"robot": robot, "envs": envs, "steps_per_env": steps, "control_steps": envs * steps,
+  return {"robot": robot, "seed": seed, "envs": envs, "steps_per_env": steps, "control_steps": envs * steps,
           "worst_excess": float(worst), "finite": bool(ok), "compile_and_run_s": time.perf_counter() - t0}
 
 
@@ -112,7 +113,8 @@ def main():
   ap.add_argument("--steps", type=int, default=500)
   ap.add_argument("--episodes", type=int, default=16, help="per scripted style; 0 skips the task rollouts")
   ap.add_argument("--tasks", default="place_plate", help="comma-separated task names")
-  ap.add_argument("--seed", type=int, default=0)
+  ap.add_argument("--seed", type=int, default=0, help="seed of the scripted rollouts")
+  ap.add_argument("--limit-seeds", default="0,1,2", help="comma-separated seeds of the random-action check")
   ap.add_argument("--out", default=None)
   args = ap.parse_args()
   names = [t for t in args.tasks.split(",") if t]
@@ -121,12 +123,17 @@ def main():
   for k in ("envs", "steps", "episodes"):
     if getattr(args, k) < (0 if k == "episodes" else 1):
       raise ValueError(f"--{k}: must be positive, got {getattr(args, k)}")
+  try:
+    limit_seeds = [int(v) for v in args.limit_seeds.split(",")]
+  except ValueError:
+    raise ValueError(f"--limit-seeds: comma-separated integers, got {args.limit_seeds!r}") from None
 
   res = {"backend": jax.default_backend(), "device": str(jax.devices()[0]), "machine": platform.machine(),
          "cpu_count": os.cpu_count(), "command": " ".join(sys.argv)}
   res["figure_eight"] = figure_eight()
   print("figure-eight:", res["figure_eight"], flush=True)
-  res["joint_limits"] = [joint_limits(r, args.envs, args.steps, args.seed) for r in ("panda", "panda_wrist")]
+  res["joint_limits"] = [joint_limits(r, args.envs, args.steps, seed) for r in ("panda", "panda_wrist")
+                         for seed in limit_seeds]
   print("joint limits:", res["joint_limits"], flush=True)
   res["step_compile"] = [step_compile(t, r) for t in names for r in ("panda", "gripper")]
   print("step compile:", res["step_compile"], flush=True)

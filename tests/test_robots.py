@@ -139,8 +139,8 @@ def test_ik_tracks_figure_eight_within_5mm():
   assert np.sqrt(np.mean(err**2)) < 0.005, np.sqrt(np.mean(err**2))
 
 
-def _check_random_actions(n_envs, n_steps, seed):
-  worst, finite, eef = checks.random_actions("panda", n_envs, n_steps)(jax.random.PRNGKey(seed))
+def _check_random_actions(n_envs, n_steps, seed, robot="panda"):
+  worst, finite, eef = checks.random_actions(robot, n_envs, n_steps)(jax.random.PRNGKey(seed))
   assert bool(finite)
   assert float(worst) < 0.01, float(worst)
   assert np.all(np.asarray(eef)[:, 2] > -0.01)  # the hand never goes through the counter
@@ -152,9 +152,30 @@ def test_random_actions_respect_joint_limits():
 
 
 @pytest.mark.slow
-def test_random_actions_respect_joint_limits_batched():
-  # 8 envs × 500 control steps; benchmarks/panda_ik.py runs 10⁴ steps for both action spaces
-  _check_random_actions(8, 500, 4)
+@pytest.mark.parametrize("robot", ["panda", "panda_wrist"])
+def test_random_actions_respect_joint_limits_batched(robot):
+  # 8 envs × 500 control steps; benchmarks/panda_ik.py runs 10⁴ steps for both action spaces, 3 seeds.
+  # Seed 3's envs 16–19 once drove the wrist's turned hand into the counter (joint 7 0.013 rad past its stop).
+  _check_random_actions(8, 500, 4, robot)
+
+
+def test_wrist_floor_keeps_the_turned_hand_above_the_workspace():
+  """PandaWrist raises the grip point's floor by how far the turned hand hangs below it; the Panda held
+  pointing down (and the wrist in that pose) keeps the task's floor."""
+  m, _, wrist = checks.bare_scene("panda_wrist")
+  panda = checks.bare_scene("panda")[2]
+  lo = jnp.array([-1.0, -1.0, 0.02])
+  down, up = jnp.asarray(panda.r_des), jnp.diag(jnp.array([1.0, 1.0, 1.0]))  # approach −z / +z (world)
+  np.testing.assert_array_equal(panda._floor(down, lo), lo)
+  np.testing.assert_allclose(wrist._floor(down, lo), lo, atol=1e-6)
+  # pointing up, link 7's far end (capsule radius 4.5 cm) hangs 0.23 m below the grip point
+  floor_up = np.asarray(wrist._floor(up, lo))
+  np.testing.assert_allclose(floor_up[:2], lo[:2])
+  np.testing.assert_allclose(floor_up[2], 0.02 + 0.2304 + 0.045, atol=2e-3)
+  # approach along world +x: link 7 (radius 4.5 cm about the approach axis) hangs lowest, below the
+  # hand box's half width (3 cm)
+  side = jnp.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+  np.testing.assert_allclose(float(wrist._floor(side, lo)[2]), 0.02 + 0.045, atol=2e-3)
 
 
 @pytest.mark.parametrize("name", ["place_plate", "pour_water", "shelve_item", "fill_bowl"])

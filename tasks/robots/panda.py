@@ -313,12 +313,17 @@ class Panda(Robot):
   def _r_target(self, r, a):
     return jnp.asarray(self.r_des)
 
+  def _floor(self, r, lo):
+    """The grip-point box's lower corner f32[3] for hand rotation ``r``: ``lo`` itself (the fingertips
+    are the lowest point of a hand held at ``r_des``)."""
+    return lo
+
   def arm_targets(self, q, a, lo, hi, base=None, target=None):
     """Joint position targets f32[7] for arm angles ``q`` f32[7] and sanitized action ``a``; ``base``
     (link0's pose the arm is solved from; default the mount) and ``target`` (grip-point target f32[3];
     default the grip point moved by the action) for the mobile base."""
     p, r, jac = self.kinematics(q, base)
-    dp = (jnp.clip(p + a[0:3] * MAX_STEP, lo, hi) if target is None else target) - p
+    dp = (jnp.clip(p + a[0:3] * MAX_STEP, self._floor(r, lo), hi) if target is None else target) - p
     err = jnp.concatenate([dp, ROT_WEIGHT * rot_err(r, self._r_target(r, a))])
     jw = jac.at[3:].multiply(ROT_WEIGHT)
     dq = dls_step(q, jw, err, jnp.asarray(Q_READY, q.dtype), NULL_GAIN, null_damping=self.null_damping)
@@ -399,15 +404,59 @@ def _exp_so3(w):
   return jnp.eye(3, dtype=w.dtype) + jnp.sin(th) * kx + (1.0 - jnp.cos(th)) * kx @ kx
 
 
+def hand_points(m: mujoco.MjModel):
+  """Where the hand's rigid side can touch things: (points f32[K, 3] m, radii f32[K] m) in the hand frame
+  (fk's rotation) about the grip point, fingers fully open. Boxes give their 8 corners (radius 0),
+  capsules their 2 end centres and radius, other geoms their centre and bounding radius; collision
+  geoms of link7 (rigid with the hand past joint 7), the hand and both fingers."""
+  d = mujoco.MjData(m)
+  for j in FINGER_JOINTS:
+    jid = m.joint(j).id
+    d.qpos[m.jnt_qposadr[jid]] = m.jnt_range[jid, 1]
+  mujoco.mj_kinematics(m, d)
+  hand_r, grip = d.xmat[m.body("panda_hand").id].reshape(3, 3), d.site("panda_grip").xpos
+  bodies = {m.body(b).id for b in ("panda_link7", "panda_hand") + FINGER_JOINTS}
+  pts, rad = [], []
+  for g in range(m.ngeom):
+    if m.geom_bodyid[g] not in bodies or not (m.geom_contype[g] or m.geom_conaffinity[g]):
+      continue
+    c, gr, size = d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+      signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
+      local, r = signs * size, np.zeros(8)
+    elif m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+      local, r = np.array([[0, 0, -size[1]], [0, 0, size[1]]]), np.full(2, size[0])
+    else:
+      local, r = np.zeros((1, 3)), np.full(1, m.geom_rbound[g])
+    pts.append((c + local @ gr.T - grip) @ hand_r)
+    rad.append(r)
+  return np.concatenate(pts).astype(np.float32), np.concatenate(rad).astype(np.float32)
+
+
 class PandaWrist(Panda):
   """The Panda with ``action = [Δx, Δy, Δz, Δrx, Δry, Δrz, gripper]``: ``a[3:6]·MAX_ROT`` is a rotation
-  vector (world frame, rad) turning the hand from its measured orientation (for pouring)."""
+  vector (world frame, rad) turning the hand from its measured orientation (for pouring).
+
+  A turned hand's lowest point is no longer its fingertips: pointing sideways its box corner, pointing
+  up its wrist (link 7) hangs below the grip point. The grip-point target's floor is raised by that
+  drop (:func:`hand_points`, at the measured rotation), so the workspace floor holds for the whole
+  hand. Without it the arm drove a turned hand into the counter at up to 87 N·m a joint, and the
+  contact's torque about the wrist (≈ 20 N·m, beyond the wrist servos' 12 N·m) slammed joint 6 or 7
+  into its stop at 4 rad/s: 0.010–0.013 rad past the limit in ``benchmarks/panda_ik.py``."""
 
   name = "panda_wrist"
   action_size = 7
 
+  def __init__(self, m: mujoco.MjModel, control_dt: float):
+    super().__init__(m, control_dt)
+    self.hand_pts, self.hand_rad = hand_points(m)
+
   def _r_target(self, r, a):
     return _exp_so3(a[3:6] * MAX_ROT) @ r
+
+  def _floor(self, r, lo):
+    drop = jnp.min(jnp.asarray(self.hand_pts) @ r[2] - jnp.asarray(self.hand_rad))  # m, ≤ 0 when below the grip point
+    return jnp.asarray(lo).at[2].add(jnp.maximum(-drop, 0.0))
 
 
 class PandaForward(Panda):
