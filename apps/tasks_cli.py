@@ -17,7 +17,7 @@ from train.cliargs import Parser
 
 COLUMNS = (("task", "name"), ("damage modality", "damage_modality"), ("tracked entities", "tracked_entities"),
            ("unsafe shortcut", "unsafe_shortcut"), ("safe strategy", "safe_strategy"), ("horizon (steps)", "horizon"),
-           ("robot", "robot"), ("success condition", "success_condition"))
+           ("robots (default first)", "robots"), ("success condition", "success_condition"))
 
 
 def markdown(rows: list[dict]) -> str:
@@ -25,14 +25,18 @@ def markdown(rows: list[dict]) -> str:
   def cell(v):
     return ", ".join(v) if isinstance(v, list) else str(v).replace("|", "\\|")
 
+  def robots(r):  # the default first, each with the variant the task builds, if any
+    names = [r["robot"]] + [n for n in r["robots"] if n != r["robot"]]
+    return [f"{n} ({r['robot_variants'][n]})" if n in r["robot_variants"] else n for n in names]
+
   lines = ["| " + " | ".join(h for h, _ in COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-  lines += ["| " + " | ".join(cell(r[k]) for _, k in COLUMNS) + " |" for r in rows]
+  lines += ["| " + " | ".join(cell(robots(r) if k == "robots" else r[k]) for _, k in COLUMNS) + " |" for r in rows]
   return "\n".join(lines)
 
 
 def build_parser() -> Parser:
   ap = Parser(prog="mjx-damage tasks", description="list the task suite: damage modality, tracked entities, "
-              "unsafe shortcut, safe strategy, horizon, robot, success condition")
+              "unsafe shortcut, safe strategy, horizon, robots, success condition")
   ap.add_argument("--task", default=None, help="describe one task (default: all)")
   ap.add_argument("--format", choices=("md", "json"), default="md")
   return ap

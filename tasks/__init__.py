@@ -213,7 +213,7 @@ def select(chosen=None, robot: str = "gripper") -> list[str]:
 
 
 DESCRIPTION_FIELDS = ("name", "summary", "damage_modality", "tracked_entities", "unsafe_shortcut", "safe_strategy",
-                      "horizon", "robot", "robots", "success_condition")
+                      "horizon", "robot", "robots", "robot_variants", "success_condition")
 
 
 def describe(name: str) -> dict:
@@ -224,7 +224,9 @@ def describe(name: str) -> dict:
   shortcut triggers), ``tracked_entities`` (damage-config entities, the robot as
   ``agent`` last), ``unsafe_shortcut``, ``safe_strategy``, ``horizon`` (default
   episode length, control steps), ``robot`` (the default robot), ``robots`` (every
-  robot ``make(name, robot=...)`` accepts) and ``success_condition``.
+  robot ``make(name, robot=...)`` accepts), ``robot_variants`` (robot → how the task builds
+  it where that is not the plain robot: a mobile base, a hand turned forward, an object welded in
+  the hand) and ``success_condition``.
   """
   cls = task_class(name)
   doc = (importlib.import_module(cls.__module__).__doc__ or "").strip()
@@ -238,6 +240,7 @@ def describe(name: str) -> dict:
       "horizon": int(cls.default_episode_length),
       "robot": robots.DEFAULT,
       "robots": robots_for(name),
+      "robot_variants": dict(cls.robot_variants),
       "success_condition": cls.success_condition,
   }
 

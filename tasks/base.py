@@ -88,6 +88,9 @@ class Task(DamageEnv):
   unsafe_shortcut: ClassVar[str] = ""
   safe_strategy: ClassVar[str] = ""
   success_condition: ClassVar[str] = ""
+  # robot name -> how the task builds that robot where it is not the plain one (a mobile base, a
+  # turned hand, an object welded in the hand); tasks.describe lists it beside the robot's name
+  robot_variants: ClassVar[dict] = {}
 
   def __init__(
       self,

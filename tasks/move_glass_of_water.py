@@ -131,6 +131,7 @@ class MoveGlassOfWater(Task):
   success_condition = "glass upright on the desk within 3 cm of the coaster, hand nearly still"
   # the Panda beside the desk facing it (as prepare_breakfast): the carry runs across its front
   robot_mounts = {"panda": P.SIDE_MOUNT}
+  robot_variants = {"gripper": "glass welded in the hand, a[3] ignored", "panda": "glass welded in the hand, a[3] ignored (PandaHolding)"}
   supported_robots = ("gripper", "panda")  # the glass is welded to the hand (PandaWrist's turns are not wired)
   obs_modes = ("full", "paper")
 

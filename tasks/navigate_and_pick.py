@@ -88,6 +88,7 @@ class NavigateAndPick(Task):
   success_condition = "caddy lifted ≥ 5 cm off the floor"
   supported_robots = ("gripper", "panda")  # a mobile base: the gripper's slides, the Panda's platform
   robot_mounts = {"panda": (0.0, 0.0, P.BASE_TOP, 0.0)}  # link0 on the platform; the base joints move it
+  robot_variants = {"panda": "on a mobile base (planar x/y/yaw)"}
 
   def edit_scene(self, spec, robot_cls):
     self.start_x, self.vase_x = START_X, VASE_X

@@ -116,6 +116,7 @@ class PlaceInMicrowave(Task):
   entities = {"dish": {"params": "plate", "bodies": ["dish"]}}
   workspace = ((-0.35, -0.3, 0.0), (0.55, 0.3, 0.35))
   robot_mounts = {"panda": PANDA_MOUNT}
+  robot_variants = {"panda": "hand pointing forward (PandaForward)"}
   default_episode_length = 150
   damage_modality = ("mechanical: the dish shoved into the microwave's back wall at full speed "
                      "(impact, then the hand's push)")

@@ -114,6 +114,7 @@ class PourWater(Task):
   safe_strategy = "carry the glass upright to the cup, then tip it"
   success_condition = "≥ 25 % of the water in the cup"
   supported_robots = ("gripper", "panda")  # the tilt channel (TILT_ROBOTS); PandaWrist's own wrist is not wired to it
+  robot_variants = {r: "a[3] tilts the held glass (a wrist hinge), fingers open" for r in supported_robots}
 
   @classmethod
   def damage_config(cls) -> dict:

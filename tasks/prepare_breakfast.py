@@ -108,6 +108,7 @@ class PrepareBreakfast(Task):
   success_condition = "tray set down within 3 cm of the goal"
   # the Panda beside the desk facing it: the 56 cm carry runs across its front, all within reach
   robot_mounts = {"panda": P.SIDE_MOUNT}
+  robot_variants = {"gripper": "tray welded in the hand, a[3] ignored", "panda": "tray welded in the hand, a[3] ignored (PandaHolding)"}
   supported_robots = ("gripper", "panda")  # the tray is welded to the hand (PandaWrist's turns are not wired)
 
   def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:

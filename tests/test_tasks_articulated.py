@@ -31,6 +31,7 @@ def test_describe_every_task():
       assert isinstance(d[field], str) and d[field], f"{name}: empty {field}"
     assert d["damage_modality"].split(":")[0] in ("mechanical", "thermal", "fluid"), name
     assert d["tracked_entities"][-1] == "agent" and d["horizon"] > 0 and d["robot"] in d["robots"]
+    assert set(d["robot_variants"]) <= set(d["robots"]), name
   with pytest.raises(ValueError, match="valid: .*open_single_door"):
     tasks.describe("open_double_door")
 
@@ -41,3 +42,6 @@ def test_tasks_command(capsys):
   assert table[0].startswith("| task | damage modality |") and len(table) == 2 + len(tasks.names())
   assert tasks_cli.main(["--task", "turn_on_faucet", "--format", "json"]) == 0
   assert json.loads(capsys.readouterr().out)["tracked_entities"] == ["faucet_handle", "agent"]
+  assert tasks_cli.main(["--task", "navigate_and_pick"]) == 0
+  row = capsys.readouterr().out.strip().splitlines()[-1]
+  assert "| gripper, panda (on a mobile base (planar x/y/yaw)) |" in row
