@@ -4,7 +4,7 @@
         [--backend mjx|native]
 
 ``--backend native`` renders the same episode with its physics stepped by native
-MuJoCo (:func:`apps.resolve.on_backend`; scenes without heat sources).
+MuJoCo (:func:`apps.resolve.on_backend`).
 Without ``--out`` the video goes to a new ``runs/render-<task>-<time>/rollout.mp4``; an
 existing video (or ``--plots`` folder) is refused unless ``--overwrite`` is given.
 """

@@ -71,8 +71,8 @@ def pick_backend(backend: str, env, num_devices: int = 1) -> str:
 
   That is native on a CPU run over one device whose scene the native backend runs (about 10x the
   MJX-JAX env-steps/s on 2 cores, 1.3x with liquid, whose particles run in JAX on either:
-  benchmarks/results/native_backend_cpu.md, native_backend_cpu_pour_water.md), else mjx
-  (accelerators, several devices, heat sources). The two agree on completion and safe completion;
+  benchmarks/results/native_backend_cpu.md, native_backend_cpu_pour_water.md, and with heat sources
+  native_backend_cpu_add_firewood.md), else mjx (accelerators, several devices). The two agree on completion and safe completion;
   health and cost can differ (README, "Native batched backend")."""
   if check_backend(backend) != "auto":
     return backend
@@ -84,7 +84,7 @@ def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
   """``env`` itself for ``mjx``; its :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``num_envs`` for
   ``native``; ``auto`` as :func:`pick_backend` decides for one device.
 
-  Raises ValueError for a scene the native backend cannot run (heat sources).
+  Raises ValueError for an env the native backend cannot run (not a task-suite, drop or K-box scene).
   """
   if pick_backend(backend, env) == "mjx":
     return env
@@ -96,7 +96,7 @@ def add_backend_argument(ap, scope: str = "", default: str = "mjx") -> None:
   (bench: only its task throughput), so the one help text says where it does not."""
   ap.add_argument("--backend", default=default,
                   help=f"physics (default {default}): mjx (compiled MJX-JAX, batched on any device), native "
-                       "(MuJoCo on C threads, CPU; scenes without heat sources) or auto (native on a one-device CPU "
+                       "(MuJoCo on C threads, CPU) or auto (native on a one-device CPU "
                        "run where the scene allows, else mjx)" + (f"; {scope}" if scope else ""))
 
 

@@ -41,9 +41,12 @@ records every substep's geom poses and body velocities (``geom_xpos``,
 ``geom_xmat``, ``cvel``, ``subtree_com``: what :func:`mjx_damage.liquid.advance`
 reads, computed by ``mj_step`` before it integrates, as MJX's substep sees
 them), and ``finish_fn`` advances the particles substep by substep over them,
-each substep's exposure feeding that substep's damage. The temperature model
-reads MJX's contact list, which the batch does not record: scenes with heat
-sources are refused (``ValueError``) rather than run without it.
+each substep's exposure feeding that substep's damage. Temperature is one-way
+coupled as well: with heat sources the rollout records every substep's link
+COMs and geom poses (``xipos``, ``geom_xpos``, ``geom_xmat``) and a contact
+sensor per (link, source) pair, and ``finish_fn`` advances the temperatures
+substep by substep with :func:`mjx_damage.temperature.advance` (the sensors
+stand in for MJX's contact list), in MJX's order: temperature, liquid, damage.
 """
 
 from __future__ import annotations
@@ -61,6 +64,7 @@ from brax.envs.base import Wrapper
 
 from mjx_damage import liquid as Lq
 from mjx_damage import physics
+from mjx_damage import temperature as T
 from mjx_damage.backends import native_batch as sensors
 
 # mjx.Data fields the batch fills after every step: state rows, then outputs (derived, one substep behind)
@@ -69,8 +73,10 @@ STATE_FIELDS = ("time", "qpos", "qvel", "act", "qacc_warmstart", "ctrl", "qfrc_a
 DERIVED_FIELDS = ("qacc", "xpos", "xquat", "xmat", "xipos", "ximat", "geom_xpos", "geom_xmat", "site_xpos",
                   "site_xmat", "subtree_com", "cvel", "actuator_force", "qfrc_actuator")
 DEFAULT_SLOTS = 16
-# recorded at every substep for the liquid (fields of the substep's forward pass, as MJX's substep reads them)
+# recorded at every substep for the liquid / the temperature (fields of the substep's forward pass, as MJX's
+# substep reads them)
 LIQUID_FIELDS = ("geom_xpos", "geom_xmat", "cvel", "subtree_com")
+THERMAL_FIELDS = ("xipos", "geom_xpos", "geom_xmat")
 
 
 def _replace_physics(env, physics_step):
@@ -120,13 +126,6 @@ def sensor_model(env, spec: mujoco.MjSpec, slots: int = DEFAULT_SLOTS):
   return model, layout
 
 
-def refusal(binding) -> Optional[str]:
-  """Why this backend cannot run a scene with this binding (heat sources), or None."""
-  if binding.thermal is None:
-    return None
-  return "backend: native has no temperature model (this scene has heat sources); use backend mjx"
-
-
 class NativeBatchEnv:
   """``num_envs`` copies of a damage-wrapped env, physics in native MuJoCo on ``nthread`` threads.
 
@@ -151,9 +150,6 @@ class NativeBatchEnv:
     binding = getattr(inner, "damage_binding", None)
     if binding is None or not hasattr(inner, "physics_step"):
       raise ValueError(f"env: the native backend needs a DamageEnv (damage per substep), got {type(inner).__name__}")
-    reason = refusal(binding)
-    if reason:
-      raise ValueError(reason)
     self.env, self.num_envs = env, num_envs
     self.n_substeps = int(inner.n_substeps)
     self.model, self.layout = sensor_model(env, spec, slots)
@@ -165,7 +161,10 @@ class NativeBatchEnv:
     self._record = None
     dt = float(inner.mj_model.opt.timestep)
     layout = self.layout
-    self._recorded = ("sensordata",) + (LIQUID_FIELDS if binding.liquid is not None else ())
+    views = (LIQUID_FIELDS if binding.liquid is not None else ()) + (
+        THERMAL_FIELDS if binding.thermal is not None else ())
+    self._views = tuple(dict.fromkeys(views))  # the substep's fields the liquid / temperature read
+    self._recorded = ("sensordata",) + self._views
     mjx_model = inner.sys
 
     def pre(state, action):
@@ -178,26 +177,30 @@ class NativeBatchEnv:
       _replace_physics(env, capture).step(state, action)
       return box[0]
 
-    def liquid(d, ds, substeps):
-      """ds with the particles advanced over the recorded substeps, and the exposure f32[S, L] of each."""
+    def one_way(d, ds, substeps):
+      """ds with temperature and particles advanced over the recorded substeps (MJX's order), and each
+      substep's temperature f32[S, L] and exposure f32[S, L]."""
       def one(ds, rec):
         view = d.replace(**{k: rec[k].reshape(getattr(d, k).shape).astype(getattr(d, k).dtype)
-                            for k in LIQUID_FIELDS})
-        ds = Lq.advance(mjx_model, binding, view, ds, dt)
-        return ds, ds.exposure
+                            for k in self._views})
+        if binding.thermal is not None:
+          ds = T.advance(mjx_model, binding, view, ds, dt, touch=sensors.touching(layout, rec["sensordata"]))
+        if binding.liquid is not None:
+          ds = Lq.advance(mjx_model, binding, view, ds, dt)
+        return ds, (ds.temperature, ds.exposure)
 
-      return jax.lax.scan(one, ds, {k: substeps[k] for k in LIQUID_FIELDS})
+      return jax.lax.scan(one, ds, {k: substeps[k] for k in ("sensordata",) + self._views})
 
     def damage(d, ds, substeps):
-      """ds after the substeps recorded in ``substeps`` (sensordata f32[S, nsensordata], liquid fields)."""
+      """ds after the substeps recorded in ``substeps`` (sensordata f32[S, nsensordata], the views' fields)."""
       sensordata = substeps["sensordata"]
       ds = physics.begin_step(ds)
-      if binding.liquid is None:
-        exposure = jnp.broadcast_to(ds.exposure, (sensordata.shape[0],) + ds.exposure.shape)
-      else:
-        ds, exposure = liquid(d, ds, substeps)
-      # no temperature here (refused above): it stays as it is over the step
-      signals = jax.vmap(lambda sd, e: sensors.link_signals(layout, sd, ds.temperature, e))(sensordata, exposure)
+      if self._views:
+        ds, (temperature, exposure) = one_way(d, ds, substeps)
+      else:  # nothing one-way coupled: temperature and exposure stay as they are over the step
+        temperature, exposure = (jnp.broadcast_to(x, (sensordata.shape[0],) + x.shape)
+                                 for x in (ds.temperature, ds.exposure))
+      signals = jax.vmap(lambda sd, t, e: sensors.link_signals(layout, sd, t, e))(sensordata, temperature, exposure)
       ds = physics.apply_recorded_substeps(ds, signals, dt)
       return ds.replace(link_vel=sensors.link_velocity(layout, sensordata[-1]))
 
@@ -230,7 +233,7 @@ class NativeBatchEnv:
 
     Returns (fields: the new ``mjx.Data`` field values, numpy f32[B, ...] by name;
     substeps: what every substep recorded, numpy f32[B, n_substeps, ...] by name — ``sensordata``,
-    and with liquid :data:`LIQUID_FIELDS`) for ``finish_fn``.
+    and with liquid / heat sources :data:`LIQUID_FIELDS` / :data:`THERMAL_FIELDS`) for ``finish_fn``.
     """
     d = state.pipeline_state
     for name, row in self._rows.items():

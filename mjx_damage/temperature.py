@@ -291,11 +291,14 @@ def link_source_distance(tm: ThermalModel, binding, m, d) -> jax.Array:
   return phi[:, np.where(col >= 0, col, order.size)]
 
 
-def advance(m, binding, d, ds, dt):
+def advance(m, binding, d, ds, dt, touch=None):
   """One explicit-Euler step of every tracked link's temperature (one environment).
 
   Reads ``d`` after ``mjx.forward`` (contacts and poses of this substep); writes
-  ``ds.temperature`` f32[L] °C. No-op without a temperature config.
+  ``ds.temperature`` f32[L] °C. No-op without a temperature config. ``touch``
+  f32[L, S]: which links touch which sources, for a backend whose ``d`` has no
+  contact list (the native batch reads it from contact sensors); default
+  :func:`touching` on ``d``'s contacts.
   """
   tm = binding.thermal
   if tm is None or binding.num_links == 0:
@@ -307,7 +310,8 @@ def advance(m, binding, d, ds, dt):
   if tm.num_sources == 0:
     return ds.replace(temperature=T + dt * cooling)
   r = link_source_distance(tm, binding, m, d)  # [L, S]
-  touch = jnp.maximum(touching(tm, binding, d), (r < 0).astype(jnp.float32))
+  touch = touching(tm, binding, d) if touch is None else jnp.asarray(touch, jnp.float32)
+  touch = jnp.maximum(touch, (r < 0).astype(jnp.float32))
   w = jnp.exp(-jnp.maximum(r, 0.0) / tm.reach[None, :])
   # a tracked link that owns a source geom does not exchange heat with itself
   own = jnp.asarray(tm.source_link)[None, :] == jnp.arange(binding.num_links)[:, None]

@@ -18,7 +18,7 @@ import os
 import mujoco
 
 import tasks
-from mjx_damage.native_batch import DEFAULT_SLOTS, NativeBatchEnv, refusal
+from mjx_damage.native_batch import DEFAULT_SLOTS, NativeBatchEnv
 from tasks import bench_table, drop
 from tasks.base import Task
 
@@ -46,11 +46,10 @@ def scene_spec(env) -> mujoco.MjSpec:
 
 def supports(env) -> bool:
   """Whether the native backend runs ``env`` (wrapped or bare): a task-suite, drop or K-box scene
-  without heat sources (:class:`NativeBatchEnv` refuses those)."""
+  (every damage model, temperature and liquid included)."""
   task = getattr(env, "unwrapped", env)
   binding = getattr(task, "damage_binding", None)
-  return (isinstance(task, (Task, drop.DropEnv, bench_table.TableEnv)) and binding is not None
-          and refusal(binding) is None)
+  return isinstance(task, (Task, drop.DropEnv, bench_table.TableEnv)) and binding is not None
 
 
 def wrap(env, num_envs: int, nthread: int = 0, slots: int = DEFAULT_SLOTS) -> NativeBatchEnv:

@@ -174,7 +174,6 @@ CLI_CASES = [
     (["bench", "--budget-s", "nan"], "--budget-s"),
     (["bench", "--out", "{tmp}/exists.json"], "--overwrite"),
     (["eval", "--task", "place_plate", "--policy", "scripted:safe", "--backend", "warp"], "backend: unknown"),
-    (["eval", "--task", "add_firewood", "--policy", "scripted:safe", "--backend", "native"], "no temperature model"),
     (["eval", "--task", "place_plate", "--policy", "zero", "--backend", "native", "--native-envs", "0"],
      "native_envs"),
     (["sweep", "--tasks", "place_plate", "--backend", "jax"], "backend: unknown"),

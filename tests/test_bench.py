@@ -212,7 +212,6 @@ def test_warp_scaling_plan_and_report(capsys):
 # --- --backend: the task throughput on either backend ------------------------------------------
 @pytest.mark.parametrize("argv, message", [
     (["--backend", "foo"], "backend: unknown backend 'foo'"),
-    (["--backend", "native", "--task", "add_firewood"], "backend: native has no temperature model (this scene has heat sources)"),
     (["--backend", "native", "--task", ""], "backend: native times the --task throughput only"),
 ])
 def test_bench_cli_rejects_bad_backend(argv, message, tmp_path, capsys, monkeypatch):

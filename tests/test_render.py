@@ -397,8 +397,6 @@ def test_native_rollout_records_the_same_episode(drop):
 @pytest.mark.parametrize("args, message", [
     (["--task", "nope", "--policy", "zero", "--out", "x.mp4"], "unknown task 'nope'"),
     (["--task", "drop", "--policy", "zero", "--out", "x.gif", "--backend", "foo"], "backend: unknown backend 'foo'"),
-    (["--task", "add_firewood", "--policy", "zero", "--out", "x.gif", "--backend", "native"],
-     "backend: native has no temperature model (this scene has heat sources)"),
     (["--task", "drop", "--policy", "greedy", "--out", "x.mp4"], "unknown policy 'greedy'"),
     (["--task", "drop", "--policy", "checkpoint:/no/such/run", "--out", "x.mp4"], "does not exist"),
     (["--task", "drop", "--policy", "zero", "--out", "x.avi"], "unsupported extension '.avi'"),

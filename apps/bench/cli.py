@@ -271,7 +271,7 @@ def main(argv=None) -> int:
       raise ValueError(f"--task: unknown task {args.task!r} (valid: {', '.join(tasks.names())}, or '' to skip)")
     if native and not args.task:
       raise ValueError("backend: native times the --task throughput only, and --task is '' (nothing to time)")
-    if native:  # a scene the native backend refuses (heat sources, liquid) fails here, before anything compiles
+    if native:  # a scene the native backend cannot run fails here, before anything compiles
       R.on_backend(R.make_task(args.task), args.backend, 1)
     if args.out is not None:
       base = os.path.splitext(args.out)[0]

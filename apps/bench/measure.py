@@ -144,7 +144,7 @@ def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend:
   (one native call and two jitted calls per step, as evaluation runs it); its
   jitted halves compile in the first step, so there ``compile_s`` is that first
   step's time. The row records ``backend``. Raises ValueError for a scene the
-  native backend refuses (heat sources, liquid).
+  native backend cannot run.
   """
   env = R.on_backend(R.make_task(name), backend, envs)
   if backend == "native":

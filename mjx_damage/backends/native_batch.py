@@ -15,6 +15,10 @@ sensors per tracked link ``l`` (its body):
   gravity gives the kinematic acceleration of :func:`native.link_acceleration`.
 * ``framelinvel``: COM velocity, f32[3] m/s (``DamageState.link_vel``).
 
+With heat sources, one more ``contact`` sensor per (link, source) pair (``body1`` = the link,
+``geom2`` = the source's geom, data ``found``): how many contacts join them, the contact half of
+:func:`mjx_damage.temperature.touching` (:func:`touching`).
+
 Sensors are evaluated by ``mj_forward`` inside ``mj_step``, at the point where
 :func:`mjx_damage.native.substep` reads its signals. A link touching more than
 ``slots`` contacts at once keeps the ``slots`` largest (:func:`dropped_contacts`
@@ -42,6 +46,7 @@ _CONTACT_DATA = (1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)) | (
     1 << int(mujoco.mjtConDataField.mjCONDATA_TANGENT))
 SLOT_SIZE = 10
 _REDUCE_MAXFORCE = 2  # the contact sensor's reduce="maxforce"
+_FOUND = 1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)
 
 
 @struct.dataclass
@@ -51,17 +56,19 @@ class SensorLayout:
   offset: first sensordata index of the damage sensors (the scene's own come first)
   num_links: L; slots: contacts kept per link
   gravity: the model's gravity, m/s² (3 floats)
+  num_sources: S, heat sources with a (link, source) contact count each (0: no heat sources)
   """
 
   offset: int = struct.field(pytree_node=False)
   num_links: int = struct.field(pytree_node=False)
   slots: int = struct.field(pytree_node=False)
   gravity: tuple = struct.field(pytree_node=False)
+  num_sources: int = struct.field(pytree_node=False, default=0)
 
   @property
   def size(self) -> int:
     """sensordata entries the damage sensors take."""
-    return self.num_links * (self.slots * SLOT_SIZE + 6)
+    return self.num_links * (self.slots * SLOT_SIZE + 6 + self.num_sources)
 
 
 def add_sensors(spec: mujoco.MjSpec, binding: "Binding", model: mujoco.MjModel, slots: int) -> SensorLayout:
@@ -79,16 +86,35 @@ def add_sensors(spec: mujoco.MjSpec, binding: "Binding", model: mujoco.MjModel, 
   for kind in (mujoco.mjtSensor.mjSENS_FRAMELINACC, mujoco.mjtSensor.mjSENS_FRAMELINVEL):
     for name in names:
       spec.add_sensor(type=kind, objtype=mujoco.mjtObj.mjOBJ_BODY, objname=name)
+  tm = binding.thermal
+  num_sources = 0 if tm is None else int(tm.num_sources)
+  if num_sources:
+    # each source is one geom, named in the temperature config
+    sources = [model.geom(int(np.flatnonzero(np.asarray(tm.geom_source) == s)[0])).name for s in range(num_sources)]
+    for name in names:
+      for src in sources:
+        s = spec.add_sensor(type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=mujoco.mjtObj.mjOBJ_BODY, objname=name,
+                            reftype=mujoco.mjtObj.mjOBJ_GEOM, refname=src)
+        s.intprm[0], s.intprm[1], s.intprm[2] = _FOUND, 0, 1
   return SensorLayout(int(model.nsensordata), binding.num_links, slots,
-                      tuple(float(g) for g in model.opt.gravity))
+                      tuple(float(g) for g in model.opt.gravity), num_sources)
 
 
 def _split(layout: SensorLayout, sensordata):
   L, K = layout.num_links, layout.slots
   s = sensordata[..., layout.offset: layout.offset + layout.size]
   con = s[..., : L * K * SLOT_SIZE].reshape(s.shape[:-1] + (L, K, SLOT_SIZE))
-  rest = s[..., L * K * SLOT_SIZE:].reshape(s.shape[:-1] + (2, L, 3))
+  rest = s[..., L * K * SLOT_SIZE: L * (K * SLOT_SIZE + 6)].reshape(s.shape[:-1] + (2, L, 3))
   return con, rest[..., 0, :, :], rest[..., 1, :, :]
+
+
+def touching(layout: SensorLayout, sensordata) -> jnp.ndarray:
+  """f32[L, S]: 1 where a contact joins link l and heat source s, from one substep's ``sensordata``
+  (:func:`mjx_damage.temperature.touching`'s contact test, read from the (link, source) sensors)."""
+  L, S = layout.num_links, layout.num_sources
+  start = layout.offset + L * (layout.slots * SLOT_SIZE + 6)
+  found = jnp.asarray(sensordata, jnp.float32)[..., start: start + L * S].reshape(L, S)
+  return (found > 0).astype(jnp.float32)
 
 
 def link_signals(layout: SensorLayout, sensordata, temperature, exposure) -> LinkSignals:
