@@ -18,7 +18,12 @@ success flag and ``done``. Per task and policy it reports:
 
 An episode ends at its first ``done`` (``terminate_on_success``); later steps
 earn nothing. ``--style`` adds task-specific scripted styles beyond
-``safe``/``unsafe`` when a task's ``policy`` accepts them.
+``safe``/``unsafe`` when a task's ``policy`` accepts them, and ``TASK:still`` for
+any task: the zero action at every step (the hand held where it is, the gripper
+at the middle of its range), the policy a damage-aware learner falls back to
+when every move it tries costs damage; its row against ``safe`` shows whether
+keeping still or the safe strategy earns more, with and without the damage
+penalty.
 
 Writes ``benchmarks/results/reward_preference[_TAG].{json,md}`` with the command.
 
@@ -51,6 +56,15 @@ from mjx_damage.io import write_json, write_text  # noqa: E402
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 RL_TASKS = ("place_plate", "pick_egg", "shelve_item")
 WINDOW = 10  # steps per window of the reward-trace summary
+
+
+STILL = "still"  # the zero action at every step
+
+
+def still_policy(env):
+  """``policy(state, rng) -> f32[A]``: the zero action (hand held, gripper at mid-range)."""
+  size = env.action_size
+  return lambda state, rng: jnp.zeros((size,), jnp.float32)
 
 
 def trace_fn(env, policies, length: int):
@@ -113,7 +127,7 @@ def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dic
   env = tasks.make(name, **overrides)
   task = env.unwrapped
   length = task.episode_length
-  policies = [task.policy(s) for s in styles]
+  policies = [still_policy(env) if s == STILL else task.policy(s) for s in styles]
   run = trace_fn(env, policies, length)
   rngs = jax.random.split(jax.random.PRNGKey(seed), episodes)  # the same episodes for every policy
   t0 = time.time()
@@ -244,7 +258,8 @@ def parse_args(argv=None):
   p.add_argument("--damage-weight", type=float, default=2.0,
                  help="w of the damage-aware return also reported (task − w·cost; the paper's w = 2)")
   p.add_argument("--style", action="append", default=[],
-                 help="TASK:STYLE, an extra scripted style of a task (repeatable)")
+                 help="TASK:STYLE, an extra scripted style of a task, or TASK:still (the zero action; "
+                      "repeatable)")
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="task keyword arguments over each task's RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; the results record them")

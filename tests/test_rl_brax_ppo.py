@@ -65,6 +65,17 @@ def test_reward_preference_takes_the_same_task_settings():
     P.parse_args(["--tasks", "pick_egg", '--task-settings={"start": "midair"}'])
 
 
+def test_reward_preference_still_style_is_the_zero_action():
+  P = load_benchmark("reward_preference")
+  a = P.parse_args(["--tasks", "shelve_item", "--style", "shelve_item:still"])
+  assert a.extra == {"shelve_item": ["still"]}
+  env = P.tasks.make("shelve_item")
+  act = P.still_policy(env)(None, None)
+  assert act.shape == (env.action_size,) and not act.any()
+  with pytest.raises(ValueError, match="style"):
+    P.parse_args(["--tasks", "shelve_item", "--style", "pick_egg:still"])
+
+
 @pytest.mark.parametrize("value", ["greedy", "mode,mode", ","])
 def test_bad_eval_actions_are_refused_naming_them(value):
   with pytest.raises(ValueError, match="eval_actions"):
