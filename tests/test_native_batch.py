@@ -1,12 +1,14 @@
 """The native batched backend: same damage as the single-env native path, same State as MJX, bad input."""
 
 import json
+import os
 
 import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from mujoco import mjx
 
 from conftest import load_benchmark
 
@@ -14,7 +16,10 @@ import tasks
 import tasks.native
 from apps import eval_cli
 from apps import resolve as R
+import mjx_damage as M
 from mjx_damage import native, physics
+from mjx_damage import temperature as T
+from mjx_damage.backends import native_batch as sensors
 from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.wrapper import DamageWrapper
 from train import evaluate as E
@@ -252,11 +257,6 @@ def test_native_benchmark_merges_a_subset_of_tasks_into_the_separation_rows(tmp_
 def test_heat_source_contact_sensors_match_mjx_touching():
   """The (link, source) contact sensors give what temperature.touching reads from MJX's contacts, on the
   heat scene of tests/test_temperature.py (a hand pressed 1 mm into the 300 °C burner, then apart)."""
-  import os
-  from mujoco import mjx
-  import mjx_damage as M
-  from mjx_damage import temperature as T
-  from mjx_damage.backends import native_batch as sensors
   path = os.path.join(os.path.dirname(__file__), "scenes", "heat.xml")
   m = mujoco.MjModel.from_xml_path(path)
   b = M.bind(m, {"entities": {"hand": {"params": "agent"}, "far": {"params": "laptop"}, "lone": {"params": "laptop"}},
