@@ -106,6 +106,11 @@ def method_spec(name: str, args) -> dict:
       tune = f"λ0={args.lagrange_init:g}, " + (f"lr={args.lagrange_lr:g}" if spec["multiplier"] == "lagrangian"
                                                else "K=" + "/".join(f"{g:g}" for g in args.pid_gains))
       spec = dict(spec, label=spec["label"].replace(")", f"; {tune})", 1), **gains)
+  if name == "penalty" and (args.damage_warmup_steps or args.damage_ramp_steps):
+    sched = f"w=0 for {args.damage_warmup_steps:.3g} steps" + (
+        f", then linear to {w:g} over {args.damage_ramp_steps:.3g}" if args.damage_ramp_steps else f", then {w:g}")
+    spec = dict(spec, label=spec["label"].replace(")", f"; {sched})", 1),
+                damage_warmup_steps=int(args.damage_warmup_steps), damage_ramp_steps=int(args.damage_ramp_steps))
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
@@ -142,6 +147,11 @@ def parse(argv):
   p.add_argument("--num-envs", type=int, default=None, help="envs per seed (default: the preset's)")
   p.add_argument("--unroll-length", type=int, default=None, help="default: the preset's")
   p.add_argument("--damage-weight", type=float, default=2.0)
+  p.add_argument("--damage-warmup-steps", type=float, default=0.0,
+                 help="penalty method: task reward alone (w = 0) for this many env steps per seed, then "
+                      "--damage-weight (train/config.py, the penalty schedule)")
+  p.add_argument("--damage-ramp-steps", type=float, default=0.0,
+                 help="penalty method: after the warm-up, w rises linearly to --damage-weight over this many env steps")
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
@@ -232,6 +242,13 @@ def parse(argv):
       p.error("--task-settings: damage_weight comes from the methods and obs_mode from --obs-mode")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
+  for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps)):
+    if not v >= 0:
+      p.error(f"{flag}: must be >= 0, got {v}")
+    if v and "penalty" not in args.methods:
+      p.error(f"{flag}: schedules the penalty method's weight; --methods has no penalty")
+    if v and not args.damage_weight > 0:
+      p.error(f"{flag}: schedules the damage weight; --damage-weight must be > 0")
   if args.resume and not args.work_dir:
     p.error("--resume: give --work-dir, the folder of the runs to continue")
   if args.work_dir and not args.resume:

@@ -153,6 +153,7 @@ CLI_CASES = [
     (["train", "--task", "place_plate", "--activation", "sigmoidal"], "activation"),
     (["train", "--task", "place_plate", "--multiplier", "pi", "--budget", "2"], "multiplier"),
     (["train", "--task", "place_plate", "--budget-anneal-steps", "1000"], "budget_anneal_steps"),
+    (["train", "--task", "place_plate", "--damage-warmup-steps", "1000"], "damage_warmup_steps"),
     (["train", "--task", "place_plate", "--budget", "2", "--budget-anneal-steps", "-5"], "budget_anneal_steps"),
     (["train", "--task", "place_plate", "--preset", "turbo"], "--preset"),
     (["train", "--task", "place_plate", "--seeds", "0,x"], "--seeds"),

@@ -27,6 +27,9 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--eval-actions", "mode,mode"], "--eval-actions"),
     (["--eval-actions", ","], "--eval-actions"),
     (["--resume"], "--resume"),  # a resumed run lives in --work-dir
+    (["--damage-warmup-steps", "-1"], "--damage-warmup-steps"),
+    (["--damage-ramp-steps", "1e6", "--methods", "pid"], "--damage-ramp-steps"),
+    (["--damage-warmup-steps", "1e6", "--damage-weight", "0"], "--damage-warmup-steps"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -142,3 +145,12 @@ def test_calls_without_work_dir_never_share_run_directories(monkeypatch, tmp_pat
   for _ in range(2):
     rl_multiseed.main(["--methods", "penalty", "--results-dir", str(tmp_path)])
   assert len(set(works)) == 2 and all(os.path.isdir(w) and not os.listdir(w) for w in works)
+
+
+def test_damage_schedule_reaches_the_penalty_method():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty", "--damage-warmup-steps", "5.5e6",
+                          "--damage-ramp-steps", "1e6"])
+  pen = rl_multiseed.method_spec("penalty", a)
+  assert (pen["damage_warmup_steps"], pen["damage_ramp_steps"]) == (5_500_000, 1_000_000)
+  assert "w=0 for 5.5e+06 steps, then linear to 2 over 1e+06" in pen["label"]
+  assert "damage_warmup_steps" not in rl_multiseed.method_spec("task_only", a)

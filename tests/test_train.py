@@ -208,8 +208,28 @@ def test_budget_curriculum_run(env):
     assert np.all(budget == 0.0) if done else np.all(budget > 0.0), (iters, budget)
 
 
+def test_scheduled_weight():
+  """The penalty schedule: w = 0 through the warm-up, then a linear ramp that reaches w at its end."""
+  it = jnp.arange(8)
+  np.testing.assert_allclose(ppo.scheduled_weight(2.0, it, 3, 4), [0, 0, 0, 0.5, 1.0, 1.5, 2.0, 2.0])
+  np.testing.assert_allclose(ppo.scheduled_weight(2.0, it, 3, 0), [0, 0, 0, 2, 2, 2, 2, 2])
+
+
+def test_damage_schedule_run(env, tmp_path):
+  """A run with the penalty schedule logs w per iteration: 0 for the warm-up, the ramp, then w."""
+  out = str(tmp_path / "run")
+  train.train(env, seeds=SEEDS, damage_weight=2.0, damage_warmup_steps=3 * ITER, damage_ramp_steps=2 * ITER,
+              num_timesteps=7 * ITER, eval_every=ITER, out_dir=out, **TINY)
+  by_it = {}  # a row after iteration i (its "iteration" i + 1) carries the w that iteration trained with
+  for r in _rows(out):
+    by_it.setdefault(r["iteration"] - 1, set()).add(round(r["damage_weight"], 6))
+  assert by_it == {0: {0.0}, 1: {0.0}, 2: {0.0}, 3: {1.0}, 4: {2.0}, 5: {2.0}, 6: {2.0}}, by_it
+
+
 @pytest.mark.parametrize("kwargs,name", [
     (dict(budget=-1.0), "budget"),
+    (dict(damage_warmup_steps=-1, damage_weight=2.0), "damage_warmup_steps"),
+    (dict(damage_ramp_steps=100), "damage_ramp_steps"),
     (dict(num_envs=0), "num_envs"),
     (dict(num_envs=12, num_minibatches=8, batch_size=None), "num_envs"),
     (dict(num_envs=16, num_minibatches=2, batch_size=12), "num_envs"),

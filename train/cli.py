@@ -85,6 +85,10 @@ def _bool(text: str) -> bool:
 # (flag, PPOConfig field, type, help). Left out → the preset's value.
 CONFIG_FLAGS = (
     ("--damage-weight", "damage_weight", float, "w in r = (r_task − (w + λ)·cost)/(1 + λ); λ = 0 without --budget"),
+    ("--damage-warmup-steps", "damage_warmup_steps", _int,
+     "penalty schedule: w = 0 (task reward alone) for this many env steps per seed, then --damage-weight"),
+    ("--damage-ramp-steps", "damage_ramp_steps", _int,
+     "penalty schedule: after the warm-up, w rises linearly to --damage-weight over this many env steps"),
     ("--budget", "budget", float, "episode-cost budget ĉ: enables the multiplier λ"),
     ("--multiplier", "multiplier", str, f"how λ follows the cost: {' | '.join(MULTIPLIERS)} (with --budget)"),
     ("--lagrange-lr", "lagrange_lr", float, "plain Lagrangian: λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max)"),

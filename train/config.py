@@ -93,6 +93,12 @@ class PPOConfig:
   # (benchmarks/results/paper_preset_sgd_steps_cpu.md), leaving the clipped ratio little to learn from.
   normalizer_after_update: bool = False
   damage_weight: float = 0.0
+  # Penalty schedule: w is 0 (task reward alone) for the first ``damage_warmup_steps`` env steps per seed,
+  # then rises linearly to ``damage_weight`` over ``damage_ramp_steps`` (0: at once). Why: where the unsafe
+  # shortcut is what the dense reward leads to and the safe strategy is reached only through it (Shelve
+  # Item), a penalty from step 0 punishes every move towards the goal before any completion has been seen.
+  damage_warmup_steps: int = 0
+  damage_ramp_steps: int = 0
   budget: Optional[float] = None
   multiplier: str = "lagrangian"
   lagrange_lr: float = 0.1
@@ -131,6 +137,12 @@ class PPOConfig:
   @property
   def lagrangian(self) -> bool:
     return self.budget is not None
+
+  @property
+  def damage_schedule_iterations(self) -> tuple[int, int]:
+    """``(damage_warmup_steps, damage_ramp_steps)`` in iterations, rounded up."""
+    per = self.steps_per_iteration
+    return -(-self.damage_warmup_steps // per), -(-self.damage_ramp_steps // per)
 
   @property
   def budget_anneal_iterations(self) -> int:
@@ -217,6 +229,12 @@ class PPOConfig:
     number("max_grad_norm", lo=0, lo_open=True, allow_none=True)
     number("target_kl", lo=0, lo_open=True, allow_none=True)
     number("damage_weight", lo=0)
+    for name in ("damage_warmup_steps", "damage_ramp_steps"):
+      v = getattr(self, name)
+      if not is_int(v) or v < 0:
+        raise ValueError(f"{name}: must be an integer >= 0 (env steps per seed), got {v!r}")
+      if v and not self.damage_weight > 0:
+        raise ValueError(f"{name}: schedules the damage weight; set damage_weight > 0 too (got {self.damage_weight!r})")
     number("budget", lo=0, allow_none=True)
     for name in ("lagrange_lr", "lagrange_init", "lagrange_max", "pid_kp", "pid_ki", "pid_kd"):
       number(name, lo=0)

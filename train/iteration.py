@@ -97,6 +97,14 @@ class TrainState:
     return self.multiplier.lam
 
 
+def scheduled_weight(damage_weight, iteration, warmup, ramp):
+  """w at ``iteration`` (i32[]) of the penalty schedule (config ``damage_warmup_steps``/``damage_ramp_steps``,
+  in iterations): 0 before ``warmup``, then linear up to ``damage_weight`` over ``ramp`` iterations."""
+  t = (iteration - warmup).astype(jnp.float32)
+  frac = jnp.clip((t + 1.0) / ramp, 0.0, 1.0) if ramp > 0 else (t >= 0).astype(jnp.float32)
+  return damage_weight * frac
+
+
 def shape_reward(r_task, cost, damage_weight, lam):
   """Policy reward ``(r_task − (w + λ)·cost) / (1 + λ)``; any matching shapes (module docstring)."""
   return (r_task - (damage_weight + lam) * cost) / (1.0 + lam)
@@ -260,7 +268,7 @@ class Trainer:
     """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order; with
     ``normalizer_after_update`` the epochs see the rollout's statistics); the cost critic's loss mixes
     with the state's w and λ (the λ the data was collected under)."""
-    weights = (ts.damage_weight, ts.multiplier.lam)
+    weights = (self.damage_weight(ts), ts.multiplier.lam)
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
     if self.cfg.normalize_observations and self.cfg.update_normalizer:
@@ -287,12 +295,20 @@ class Trainer:
     return (params.replace(policy=keep(ts.params.policy, params.policy)),
             opt_state._replace(inner_states=inner))
 
+  def damage_weight(self, ts: TrainState):
+    """w of this iteration: ``ts.damage_weight`` under the config's penalty schedule (f32[])."""
+    warmup, ramp = self.cfg.damage_schedule_iterations
+    if not (warmup or ramp):
+      return ts.damage_weight
+    return scheduled_weight(ts.damage_weight, ts.iteration, warmup, ramp)
+
   def train_iteration(self, ts: TrainState):
     """``(TrainState) -> (TrainState, metrics: dict of f32[])`` for one seed."""
     lam = ts.multiplier.lam
+    w = self.damage_weight(ts)  # before collect: update() sees the same iteration
     ts, data, ended = self.collect(ts)
     cost = data.extras["state_extras"]["cost"]  # f32[R·E, T]
-    shaped = shape_reward(data.reward, cost, ts.damage_weight, lam)
+    shaped = shape_reward(data.reward, cost, w, lam)
     if not self.cfg.cost_critic:  # with a cost critic the loss mixes the advantages instead (train.constrained_loss)
       data = data._replace(reward=shaped)
     n = ended["episodes"]
@@ -311,7 +327,7 @@ class Trainer:
       finite &= jnp.all(jnp.isfinite(leaf).reshape(leaf.shape[:2] + (-1,)), axis=-1)
     metrics.update(step_reward=self._pmean(jnp.mean(shaped)), step_cost=self._pmean(jnp.mean(cost)),
                    env_non_finite=self._pmean(1.0 - jnp.mean(finite.astype(jnp.float32))),
-                   lagrange=mult.lam, budget=M.effective_budget(mult, ts.multiplier_params),
+                   lagrange=mult.lam, damage_weight=w, budget=M.effective_budget(mult, ts.multiplier_params),
                    cost_estimate=cost_estimate)
     return ts, metrics
 
