@@ -26,7 +26,8 @@ One command:
    fell to 0 % on one H100 (docs/IMITATION.md has the ablations).
 
 Reports completion and safe completion (DAMAGE_MODEL.md §7) before and after, per
-seed and mean ± std, in ``benchmarks/results/bc_finetune_<task>_<device>[_<tag>].{json,md}``.
+seed and mean ± std, in ``benchmarks/results/bc_finetune_<task>[_<robot>]_<device>[_<tag>].{json,md}``
+(``--robot``: default the gripper, the robot of the committed results).
 
 GPU (one call, ≤ 10 min)::
 
@@ -102,6 +103,9 @@ def stats(rows: list[dict], key: str) -> tuple[float, float]:
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   ap.add_argument("--task", default="move_glass_of_water" if "move_glass_of_water" in tasks.names() else "pour_water")
+  ap.add_argument("--robot", default="gripper",
+                  help=f"robot of the task ({', '.join(tasks.robots.names())}; default gripper: the robot of the "
+                       "committed results)")
   ap.add_argument("--quick", action="store_true", help="tiny CPU run: the pipeline, not the experiment")
   ap.add_argument("--preset", default="playground")
   ap.add_argument("--tag", default="")
@@ -127,6 +131,10 @@ def main(argv=None) -> int:
   size.update({k: getattr(args, k) for k in FULL if getattr(args, k) is not None})
   if args.task not in tasks.names():
     ap.error(f"--task: unknown task {args.task!r}")
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if args.robot not in tasks.robots_for(args.task):
+    ap.error(f"--robot: {args.task} supports {', '.join(tasks.robots_for(args.task))} only, got {args.robot!r}")
   for k, v in size.items():
     if not (v >= 0 if k in ("warmup", "damage_weight") else v > 0):  # also refuses NaN
       ap.error(f"--{k.replace('_', '-')}: must be {'>= 0' if k in ('warmup', 'damage_weight') else '> 0'}, got {v}")
@@ -145,7 +153,8 @@ def main(argv=None) -> int:
   seeds = tuple(range(size["seeds"]))
   slug, desc = device_info()
   t_start = time.perf_counter()
-  env = tasks.make(args.task)
+  # the robot named always (not tasks.robots.DEFAULT): the committed results are the gripper's
+  env = tasks.make(args.task, robot=args.robot)
   T = E.env_episode_length(env)
 
   # 1. a mixed dataset: up to --demos successful episodes from each source. Noisy operators by default:
@@ -171,7 +180,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     fit = BA.fit_actor(data, cfg, seeds=seeds, steps=size["bc_steps"], batch=256)
     bc_dir = os.path.join(tmp, "bc")
-    BA.save(fit, bc_dir, task=args.task)
+    BA.save(fit, bc_dir, task=args.task, task_kwargs={"robot": args.robot})
     bc_s = time.perf_counter() - t0
     # 3. BC evaluation
     before = eval_checkpoint(bc_dir, env, seeds, size["eval_episodes"])
@@ -181,7 +190,7 @@ def main(argv=None) -> int:
                                    for s, m in zip(seeds, ev)), flush=True)
     # 4. PPO fine-tuning with the damage penalty, all seeds in one program
     t0 = time.perf_counter()
-    res = train.train(args.task, preset=args.preset, seeds=seeds, init_from=bc_dir,
+    res = train.train(args.task, preset=args.preset, seeds=seeds, init_from=bc_dir, task_kwargs={"robot": args.robot},
                       critic_warmup_iterations=size["warmup"], damage_weight=size["damage_weight"],
                       num_envs=size["num_envs"], num_timesteps=size["timesteps"],
                       num_eval_envs=size["eval_episodes"], progress=False, plot=False,
@@ -195,7 +204,10 @@ def main(argv=None) -> int:
   summary = {k: {"before": stats(before, k), "sampled": stats(sampled, k), "after": stats(after, k)}
              for k in ("completion", "safe_completion")}
   curves = [{k: r.get(k) for k in ("seed", "env_steps", "wall_time") + CURVE_KEYS} for r in res.history]
-  result = {"command": cmd.strip(), "device": desc, "task": args.task, "preset": args.preset, "size": size,
+  # the robot recorded (and in the file name) only when not the gripper: default results stay as committed
+  robot_meta = {} if args.robot == "gripper" else {"robot": args.robot}
+  result = {"command": cmd.strip(), "device": desc, "task": args.task, **robot_meta, "preset": args.preset,
+            "size": size,
             "demos_from": args.demos_from, "policy_hidden": list(hidden), "finetune": dict(ft, update_normalizer=args.ft_update_normalizer),
             "quick": args.quick, "seeds": list(seeds), "dataset_episodes": kept, "bc_seconds": bc_s,
             "finetune_seconds": ft_s, "budget_seconds": args.budget_seconds, "stopped_early": res.stopped_early,
@@ -203,7 +215,9 @@ def main(argv=None) -> int:
             "env_steps_per_seed": res.env_steps, "before": before, "sampled": sampled, "after": after,
             "summary": summary, "curves": curves}
   os.makedirs(args.results_dir, exist_ok=True)
-  base = os.path.join(args.results_dir, f"bc_finetune_{args.task}_{slug}" + (f"_{args.tag}" if args.tag else ""))
+  robot_part = "" if args.robot == "gripper" else f"_{args.robot}"
+  base = os.path.join(args.results_dir,
+                      f"bc_finetune_{args.task}{robot_part}_{slug}" + (f"_{args.tag}" if args.tag else ""))
   write_json(base + ".json", result)
   lines = [f"# BC → PPO fine-tuning with the damage penalty: {args.task} ({desc})", "",
            f"Command: `{result['command']}`", "",

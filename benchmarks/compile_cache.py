@@ -10,6 +10,9 @@ imports, tracing, compiling (or loading from the cache) and the rollouts. The
 cache's entry count and size after each run show whether the second run hit
 the cache (no new entries) or missed it (new entries: non-deterministic keys).
 
+``--robot`` (default the gripper, the committed results' robot) goes to every eval command; another
+robot writes ``compile_cache_<robot>_cpu`` (the robot in the JSON).
+
 Writes ``benchmarks/results/compile_cache_cpu.{json,md}``. Target: second ≤ first / 3.
 """
 
@@ -52,7 +55,8 @@ def cache_stats(path: str) -> tuple[int, int]:
   return n, size
 
 
-def run_eval(task: str, policy: str, episodes: int, cache: str, work: str, tag: str, timeout: float) -> dict:
+def run_eval(task: str, policy: str, episodes: int, cache: str, work: str, tag: str, timeout: float,
+             robot: str = "gripper") -> dict:
   """One fresh process of ``python -m apps.cli eval``; its wall time and the cache after it."""
   env = dict(os.environ)
   env.pop("JAX_COMPILATION_CACHE_DIR", None)  # the package's own setting is what is measured
@@ -61,7 +65,10 @@ def run_eval(task: str, policy: str, episodes: int, cache: str, work: str, tag: 
   env["JAX_PLATFORMS"] = "cpu"
   env["JAX_LOG_COMPILES"] = "1"
   out = os.path.join(work, f"{task}_{tag}.json")
-  argv = ["eval", "--task", task, "--policy", policy, "--episodes", str(episodes), "--out", out]
+  flags = ["--policy", policy, "--episodes", str(episodes)]
+  # the robot always goes to eval (its default may change); gripper rows show the command as recorded before --robot
+  argv = ["eval", "--task", task, "--robot", robot, *flags, "--out", out]
+  shown = ["eval", "--task", task, *(["--robot", robot] if robot != "gripper" else []), *flags]
   t0 = time.perf_counter()
   p = subprocess.run([sys.executable, "-m", "apps.cli", *argv], cwd=work, env=env, capture_output=True,
                      text=True, timeout=timeout)
@@ -73,7 +80,7 @@ def run_eval(task: str, policy: str, episodes: int, cache: str, work: str, tag: 
   phases = {k: round(sum(float(x) for x in rx.findall(p.stderr)), 2) for k, rx in _PHASES.items()}
   return {"wall_s": round(wall, 2), "eval_s": float(m.group(1)) if m else None, **phases,
           "cache_entries": entries, "cache_mb": round(size / 2**20, 2),
-          "command": "mjx-damage " + " ".join(argv[:-2]), "load_after": round(os.getloadavg()[0], 1)}
+          "command": "mjx-damage " + " ".join(shown), "load_after": round(os.getloadavg()[0], 1)}
 
 
 def main(argv=None) -> int:
@@ -82,9 +89,20 @@ def main(argv=None) -> int:
   ap.add_argument("--policy", default="scripted:safe")
   ap.add_argument("--episodes", type=int, default=8)
   ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per process")
-  ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "compile_cache_cpu"),
-                  help="results path without extension (.json and .md are written)")
+  ap.add_argument("--out", default=None, help="results path without extension (.json and .md are written; default "
+                  "benchmarks/results/compile_cache_cpu, another --robot: compile_cache_<robot>_cpu)")
+  ap.add_argument("--robot", default="gripper",
+                  help="robot of every task (tasks.robots.names(); default: gripper, the robot of the committed results)")
   args = ap.parse_args(argv)
+  import tasks  # checked here, before any eval process starts
+
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  for task in args.tasks:
+    if task in tasks.names() and args.robot not in tasks.robots_for(task):
+      ap.error(f"--robot: task {task!r} supports {', '.join(tasks.robots_for(task))} only, got {args.robot!r}")
+  robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
+  args.out = args.out or os.path.join(ROOT, "benchmarks", "results", f"compile_cache_{robot}cpu")
   cmd = "python benchmarks/compile_cache.py" + "".join(f" {a}" for a in (sys.argv[1:] if argv is None else argv))
   rows = []
   load_before = round(os.getloadavg()[0], 1)
@@ -92,8 +110,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="mjxd_cc_") as tmp:
       cache, work = os.path.join(tmp, "cache"), os.path.join(tmp, "work")
       os.makedirs(work)
-      first = run_eval(task, args.policy, args.episodes, cache, work, "first", args.timeout)
-      second = run_eval(task, args.policy, args.episodes, cache, work, "second", args.timeout)
+      first = run_eval(task, args.policy, args.episodes, cache, work, "first", args.timeout, args.robot)
+      second = run_eval(task, args.policy, args.episodes, cache, work, "second", args.timeout, args.robot)
       shutil.rmtree(cache, ignore_errors=True)
     ratio = second["wall_s"] / first["wall_s"]
     # what a warm run would take if the traced program were stored too (tracing and lowering skipped)
@@ -110,6 +128,8 @@ def main(argv=None) -> int:
       "cpu_count": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
       "load_before": load_before, "rows": rows,
   }
+  if robot:
+    result["robot"] = args.robot
   write_json(args.out + ".json", result)
   lines = [
       "# Persistent compilation cache: first vs second `mjx-damage eval` (CPU)", "",

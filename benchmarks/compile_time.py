@@ -8,7 +8,8 @@ each row also records the process CPU seconds (all threads) spent tracing + comp
 whatever else runs — and the 1-minute load average before and after. Target (issue 14): ≤ 60 s per
 task on the 2-core CPU when quiet.
 
-Writes ``benchmarks/results/compile_time_cpu.{json,md}``; rows of tasks not in this run are kept.
+Writes ``benchmarks/results/compile_time_cpu[_<robot>].{json,md}``; rows of tasks not in this run are kept.
+``--robot`` (default the gripper, the robot of the committed results) is in the name when not the gripper.
 
 Usage::
 
@@ -41,11 +42,11 @@ RESULTS = os.path.join(ROOT, "benchmarks", "results")
 TARGET_S = 60.0
 
 
-def measure(name: str, episodes: int) -> dict:
+def measure(name: str, episodes: int, robot: str = "gripper") -> dict:
   """Trace + compile task ``name``'s rollout of ``episodes`` episodes per policy; wall and CPU seconds."""
   load0 = os.getloadavg()[0]
   w0, c0 = time.time(), time.process_time()
-  env = tasks.make(name)
+  env = tasks.make(name, robot=robot)
   run = rollout_fn(env, [tasks.scripted_policy(env, s) for s in tasks.STYLES], env.unwrapped.episode_length)
   rngs = jax.random.split(jax.random.PRNGKey(0), 2 * episodes)
   which = jnp.repeat(jnp.arange(2), episodes)
@@ -60,15 +61,18 @@ def measure(name: str, episodes: int) -> dict:
           "meets_target_cpu": (c2 - c0) <= TARGET_S}
 
 
-def write(rows: list[dict], command: str) -> None:
-  path = os.path.join(RESULTS, "compile_time_cpu.json")
+def write(rows: list[dict], command: str, robot: str = "gripper") -> None:
+  # another robot's rows go to their own files (the gripper's names and contents stay as committed)
+  stem = "compile_time_cpu" + ("" if robot == "gripper" else f"_{robot}")
+  path = os.path.join(RESULTS, stem + ".json")
   done = {r["task"] for r in rows}
   if os.path.exists(path):
     with open(path) as f:
       rows = [r for r in json.load(f).get("rows", []) if r["task"] not in done] + rows
   rows = sorted(rows, key=lambda r: r["task"])
   meta = {"command": command, "jax": jax.__version__, "machine": platform.machine(), "cpu_count": os.cpu_count(),
-          "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
+          "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+          **({} if robot == "gripper" else {"robot": robot})}
   write_json(path, {"meta": meta, "rows": rows}, indent=1)
   lines = ["# First compile of each task's batched scripted rollout (CPU, persistent cache off)", "",
            f"Command: `{command}`  ", f"jax {meta['jax']}, {meta['cpu_count']} CPU cores shared with other jobs, "
@@ -84,26 +88,33 @@ def write(rows: list[dict], command: str) -> None:
     lines.append(f"| {r['task']} | {r['trace_wall_s']:.1f} / {r['trace_cpu_s']:.1f} | {r['compile_wall_s']:.1f} / "
                  f"{r['compile_cpu_s']:.1f} | {r['total_wall_s']:.1f} / {r['total_cpu_s']:.1f} | "
                  f"{r['load1_before']:.1f} → {r['load1_after']:.1f} | {'met' if r['meets_target_cpu'] else 'MISSED'} |")
-  write_text(os.path.join(RESULTS, "compile_time_cpu.md"), "\n".join(lines) + "\n")
+  write_text(os.path.join(RESULTS, stem + ".md"), "\n".join(lines) + "\n")
 
 
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-  p.add_argument("--tasks", default=",".join(tasks.names()))
+  p.add_argument("--tasks", default=None, help="comma-separated (default: every task --robot runs)")
+  p.add_argument("--robot", default="gripper",
+                 help=f"robot of every task ({', '.join(tasks.robots.names())}; default gripper: the robot of the "
+                      "committed results)")
   p.add_argument("--episodes", type=int, default=64, help="episodes per policy in the compiled batch")
   a = p.parse_args(argv)
-  names = [n for n in a.tasks.split(",") if n]
+  if a.robot not in tasks.robots.names():
+    raise ValueError(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  names = tasks.select(None, a.robot) if a.tasks is None else [n for n in a.tasks.split(",") if n]
   for n in names:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
+    if a.robot not in tasks.robots_for(n):
+      raise ValueError(f"--robot: {n} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
   if a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   command = "PYTHONPATH=. .venv/bin/python benchmarks/compile_time.py " + " ".join(
       argv if argv is not None else sys.argv[1:])
   rows = []
   for n in names:
-    rows.append(measure(n, a.episodes))
+    rows.append(measure(n, a.episodes, a.robot))
     print(json.dumps(rows[-1]), flush=True)
-    write(rows, command.strip())
+    write(rows, command.strip(), a.robot)
   return 0
 
 

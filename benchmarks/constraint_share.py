@@ -7,10 +7,12 @@ load it). The articulation's mean final health and mean episode mechanical
 damage of both runs are written to ``benchmarks/results/constraint_share.{md,json}``:
 the difference is the damage the joint-limit force adds
 (docs/DAMAGE_MODEL.md, "How a joint-limit force enters the damage model").
+``--robot`` (default the gripper, the robot of the committed results) other than the
+gripper writes ``constraint_share_<robot>.{md,json}``.
 
 Usage::
 
-    .venv/bin/python benchmarks/constraint_share.py [--episodes 64] [--tasks a,b] [--seed 0]
+    .venv/bin/python benchmarks/constraint_share.py [--episodes 64] [--tasks a,b] [--seed 0] [--robot gripper]
 """
 
 from __future__ import annotations
@@ -36,17 +38,21 @@ ARTICULATED = ("open_single_door", "turn_on_microwave", "turn_on_faucet")
 STYLES = ("safe", "unsafe")
 
 
-def make(name: str, constraint: bool):
-  """Task ``name`` wrapped for damage, its articulation's joint-limit damage on (as shipped) or off."""
+def make(name: str, constraint: bool, robot: str = "gripper"):
+  """Task ``name`` with ``robot`` wrapped for damage, its articulation's joint-limit damage on (as shipped) or off."""
   cls = tasks.task_class(name)
   if not constraint:
     entities = {k: {**v, "constraint": False} for k, v in cls.entities.items()}
     cls = type(cls.__name__ + "ContactOnly", (cls,), {"entities": entities, "__module__": cls.__module__})
-  return DamageWrapper(cls())
+  # the robot set before the constructor runs, as tasks.make does (the class default is tasks.robots.DEFAULT)
+  env = cls.__new__(cls)
+  env.robot_name = robot
+  env.__init__()
+  return DamageWrapper(env)
 
 
-def run(name: str, constraint: bool, episodes: int, seed: int) -> list[dict]:
-  env = make(name, constraint)
+def run(name: str, constraint: bool, episodes: int, seed: int, robot: str = "gripper") -> list[dict]:
+  env = make(name, constraint, robot)
   art = env.entity_names.index(next(iter(env.unwrapped.entities)))
   fn = rollout_fn(env, [tasks.scripted_policy(env, s) for s in STYLES], env.unwrapped.episode_length)
   which = jnp.repeat(jnp.arange(len(STYLES)), episodes)
@@ -70,19 +76,30 @@ def main(argv=None) -> int:
   p.add_argument("--episodes", type=int, default=64)
   p.add_argument("--tasks", default=",".join(ARTICULATED))
   p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--robot", default="gripper",
+                 help=f"robot of every task ({', '.join(tasks.robots.names())}; default gripper: the robot of the "
+                      "committed results)")
   a = p.parse_args(argv)
+  if a.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
   names = [n for n in a.tasks.split(",") if n]
   for n in names:
     tasks.task_class(n)
+    if a.robot not in tasks.robots_for(n):
+      p.error(f"--robot: {n} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
   command = ".venv/bin/python benchmarks/constraint_share.py " + " ".join(sys.argv[1:] if argv is None else argv)
   rows = []
   for n in names:
     for constraint in (True, False):
-      rows += run(n, constraint, a.episodes, a.seed)
+      rows += run(n, constraint, a.episodes, a.seed, a.robot)
       print(rows[-2], rows[-1], flush=True)
   meta = {"command": command.strip(), "jax": jax.__version__, "backend": jax.default_backend(),
           "machine": platform.processor() or platform.machine(), "date": time.strftime("%Y-%m-%d %H:%M:%S %Z")}
-  write_json(os.path.join(RESULTS, "constraint_share.json"), {"meta": meta, "rows": rows})
+  # another robot's results in their own files, named in meta (the gripper's stay as committed)
+  stem = "constraint_share" + ("" if a.robot == "gripper" else f"_{a.robot}")
+  if a.robot != "gripper":
+    meta["robot"] = a.robot
+  write_json(os.path.join(RESULTS, stem + ".json"), {"meta": meta, "rows": rows})
   lines = [
       "# Joint-limit constraint damage: articulated tasks with the articulation's `constraint` on vs off",
       "",
@@ -97,7 +114,7 @@ def main(argv=None) -> int:
     lines.append(f"| {r['task']} | {r['policy']} | {'on' if r['constraint'] else 'off'} | "
                  f"{r['articulation_health_mean']:.1f} | {r['agent_health_mean']:.1f} | "
                  f"{r['mechanical_damage_mean']:.1f} | {r['completion_pct']:.1f} |")
-  write_text(os.path.join(RESULTS, "constraint_share.md"), "\n".join(lines) + "\n")
+  write_text(os.path.join(RESULTS, stem + ".md"), "\n".join(lines) + "\n")
   return 0
 
 

@@ -11,7 +11,8 @@ it. Checks:
   "call" is 100 executions, since each deadlocks only with some probability.
 - ``task``: one jit(vmap) call of ``--envs`` environments × ``--steps`` env
   steps of a task with its scripted safe policy (one physics step = MJX's
-  Newton solver = one batched Cholesky per substep).
+  Newton solver = one batched Cholesky per substep), with ``--robot`` (default
+  the gripper, the robot of the committed results; the command records it).
 
 Usage::
 
@@ -38,7 +39,7 @@ RESULTS = os.path.join(HERE, "results")
 MODES = {"fix": {}, "nofix": {"MJX_DAMAGE_XLA_CPU_FIX": "0"}}
 
 
-def child(check: str, envs: int, steps: int, calls: int, task: str) -> None:
+def child(check: str, envs: int, steps: int, calls: int, task: str, robot: str = "gripper") -> None:
   """Run the check in this process; prints one line per call."""
   import mjx_damage  # noqa: F401  (applies the XLA:CPU setting unless switched off)
   import jax
@@ -62,7 +63,7 @@ def child(check: str, envs: int, steps: int, calls: int, task: str) -> None:
   else:
     import tasks
 
-    env = tasks.make(task)
+    env = tasks.make(task, robot=robot)
     policy = tasks.scripted_policy(env, "safe")
 
     def episode(key):
@@ -107,7 +108,8 @@ def _native_stacks(pid: int) -> str:
   return "(neither gdb nor py-spy installed: native stacks not dumped)"
 
 
-def run_check(check: str, mode: str, envs: int, steps: int, calls: int, task: str, timeout: float) -> dict:
+def run_check(check: str, mode: str, envs: int, steps: int, calls: int, task: str, timeout: float,
+              robot: str = "gripper") -> dict:
   """One fresh process; returns its outcome, with stack dumps when it stalled."""
   # no persistent cache: each process compiles under its own XLA flags
   env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1", MJX_DAMAGE_CACHE_DIR="off", **MODES[mode])
@@ -115,7 +117,7 @@ def run_check(check: str, mode: str, envs: int, steps: int, calls: int, task: st
   if mode == "nofix":
     env["XLA_FLAGS"] = env.get("XLA_FLAGS", "").replace("--xla_cpu_enable_concurrency_optimized_scheduler=false", "")
   cmd = [sys.executable, os.path.abspath(__file__), "--child", check, "--envs", str(envs), "--steps", str(steps),
-         "--calls", str(calls), "--task", task]
+         "--calls", str(calls), "--task", task] + (["--robot", robot] if check == "task" else [])
   t0 = time.perf_counter()
   p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
   try:
@@ -156,6 +158,30 @@ def markdown(rows: list[dict], command: str) -> str:
   return "\n".join(lines) + "\n"
 
 
+def check_robot(p: argparse.ArgumentParser, robot: str, task: str, keep_flags: bool) -> None:
+  """``p.error`` naming --robot for a robot that is not registered or does not run ``task``.
+
+  The gripper (the default) is always registered: checked without importing the package, so the default
+  parent stays free of jax. Another robot imports :mod:`tasks`, whose ``import mjx_damage`` adds the
+  XLA:CPU fix to ``XLA_FLAGS``; the parent restores its own (``keep_flags=False``), since its children
+  inherit its environment and ``nofix`` must run without the fix.
+  """
+  if robot == "gripper":
+    return
+  saved = os.environ.get("XLA_FLAGS")
+  import tasks
+
+  if not keep_flags:
+    if saved is None:
+      os.environ.pop("XLA_FLAGS", None)
+    else:
+      os.environ["XLA_FLAGS"] = saved
+  if robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if task in tasks.names() and robot not in tasks.robots_for(task):
+    p.error(f"--robot: {task} supports {', '.join(tasks.robots_for(task))} only, got {robot!r}")
+
+
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                               formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -167,14 +193,17 @@ def main(argv=None) -> int:
   p.add_argument("--steps", type=int, default=1, help="env steps per call (task check)")
   p.add_argument("--calls", type=int, default=3, help="calls per process")
   p.add_argument("--task", default="place_plate", help="task of the task check")
+  p.add_argument("--robot", default="gripper",
+                 help="robot of the task check (tasks.robots.names()); gripper: the robot of the committed results")
   p.add_argument("--timeout", type=float, default=180.0, help="seconds a process may take, compile included")
   p.add_argument("--out", default=RESULTS, help="results directory, or - to print only")
   a = p.parse_args(argv)
   for field in ("repeats", "envs", "steps", "calls"):
     if getattr(a, field) < 1:
       p.error(f"--{field}: must be >= 1, got {getattr(a, field)}")
+  check_robot(p, a.robot, a.task, keep_flags=bool(a.child))
   if a.child:
-    child(a.child, a.envs, a.steps, a.calls, a.task)
+    child(a.child, a.envs, a.steps, a.calls, a.task, a.robot)
     return 0
   checks, modes = a.checks.split(","), a.modes.split(",")
   for c in checks:
@@ -187,7 +216,7 @@ def main(argv=None) -> int:
   for c in checks:
     for m in modes:
       for i in range(a.repeats):
-        r = run_check(c, m, a.envs, a.steps, a.calls, a.task, a.timeout)
+        r = run_check(c, m, a.envs, a.steps, a.calls, a.task, a.timeout, a.robot)
         rows.append(r)
         print(f"{c:8s} {m:5s} repeat {i}: {'ok' if r['ok'] else 'STALLED'} {r['calls_done']}/{a.calls} calls, "
               f"{r['wall_s']} s", flush=True)

@@ -37,8 +37,9 @@ Usage::
     python benchmarks/determinism.py                    # GPU: 1024 envs × 200 steps, 3 tasks
     python benchmarks/determinism.py --envs 8 --steps 20  # CPU size
 
-Writes ``benchmarks/results/determinism_<platform>.{json,md}`` (``--out``: another
-JSON path); exits 1 when a check fails.
+Writes ``benchmarks/results/determinism_<platform>[_<robot>].{json,md}`` (``--out``: another
+JSON path); exits 1 when a check fails. ``--robot`` (default the gripper, the robot of the committed
+results) is in the name and the results when not the gripper.
 """
 
 from __future__ import annotations
@@ -173,7 +174,8 @@ def rejudge(path: str, p) -> int:
     # only rerun / chunked are judged by which leaves differ
     if any(len(r["checks"][k]["differing_leaves"]) >= MAX_PATHS for k in ("rerun", "chunked")):
       p.error(f"--rejudge: {r['task']} lists {MAX_PATHS} differing leaves, maybe not all of them; rerun instead")
-    judge(r["checks"], tolerance(tasks.make(r["task"])), res["strict"])
+    # the file's robot: recorded when not the gripper (files before --robot: the gripper)
+    judge(r["checks"], tolerance(tasks.make(r["task"], robot=res.get("robot", "gripper"))), res["strict"])
     r["ok"] = r["envs_distinct"] and all(c["ok"] for c in r["checks"].values())
   res["ok"] = all(r["ok"] for r in res["tasks"])
   res["rejudged"] = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
@@ -183,9 +185,9 @@ def rejudge(path: str, p) -> int:
   return 0 if res["ok"] else 1
 
 
-def check_task(name: str, envs: int, steps: int, seed: int, strict: bool) -> dict:
-  """The four checks of one task (module docstring); ``strict``: every check must be bitwise."""
-  env = tasks.make(name)
+def check_task(name: str, envs: int, steps: int, seed: int, strict: bool, robot: str = "gripper") -> dict:
+  """The four checks of one task with ``robot`` (module docstring); ``strict``: every check must be bitwise."""
+  env = tasks.make(name, robot=robot)
   keys = jax.random.split(jax.random.PRNGKey(seed), envs)
   split = (steps // 3, steps - steps // 3)
   t0 = time.perf_counter()
@@ -265,6 +267,9 @@ def main(argv=None) -> int:
                               formatter_class=argparse.ArgumentDefaultsHelpFormatter)
   gpu = jax.default_backend() != "cpu"
   p.add_argument("--tasks", default=",".join(DEFAULT_TASKS), help="comma-separated task names")
+  p.add_argument("--robot", default="gripper",
+                 help=f"robot of every task ({', '.join(tasks.robots.names())}); gripper: the robot of the "
+                      "committed results")
   p.add_argument("--envs", type=int, default=1024 if gpu else 8, help="environments per task (even, >= 2)")
   p.add_argument("--steps", type=int, default=200 if gpu else 20, help="env steps per rollout (>= 3)")
   p.add_argument("--seed", type=int, default=7)
@@ -284,6 +289,11 @@ def main(argv=None) -> int:
   for t in names:
     if t not in tasks.names():
       p.error(f"--tasks: unknown task {t!r}; valid: {', '.join(tasks.names())}")
+  if args.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  for t in names:
+    if args.robot not in tasks.robots_for(t):
+      p.error(f"--robot: {t} supports {', '.join(tasks.robots_for(t))} only, got {args.robot!r}")
   if args.envs < 2 or args.envs % 2:
     p.error(f"--envs: an even number >= 2, got {args.envs}")
   if args.steps < 3:
@@ -292,7 +302,7 @@ def main(argv=None) -> int:
   t0 = time.perf_counter()
   rows = []
   for name in names:
-    r = check_task(name, args.envs, args.steps, args.seed, args.strict)
+    r = check_task(name, args.envs, args.steps, args.seed, args.strict, args.robot)
     rows.append(r)
     print(f"{name}: {'PASS' if r['ok'] else 'FAIL'} "
           f"{ {k: (c['bitwise'], c['max_abs_diff']['reward']) for k, c in r['checks'].items()} } {r['wall_s']} s",
@@ -307,7 +317,11 @@ def main(argv=None) -> int:
          "matmul_precision": args.matmul_precision,
          "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__}, "tasks": rows,
          "ok": all(r["ok"] for r in rows)}
-  out = args.out or os.path.join(HERE, "results", f"determinism_{dev.platform}.json")
+  # the robot in the results and the default name only when not the gripper (those stay as committed)
+  robot_part = ""
+  if args.robot != "gripper":
+    res["robot"], robot_part = args.robot, f"_{args.robot}"
+  out = args.out or os.path.join(HERE, "results", f"determinism_{dev.platform}{robot_part}.json")
   io.write_json(out, res)
   io.write_text(os.path.splitext(out)[0] + ".md", report_md(res))
   print(f"wrote {out}; {'PASS' if res['ok'] else 'FAIL'}")

@@ -9,7 +9,8 @@ at the unsafe carry's full speed), N randomised episodes (the same reset keys fo
 completion, eggs still in the hand at the end, steps to success, and the discounted task return the crushing
 shortcut earns over it on the paired episodes (γ 0.97 and 0.99).
 
-Writes ``benchmarks/results/egg_carry_sweep.{json,md}`` with the command.
+Writes ``benchmarks/results/egg_carry_sweep[_<robot>].{json,md}`` with the command. ``--robot`` (default the
+gripper, the robot of the committed results) is in the name and the results when not the gripper.
 
 Usage::
 
@@ -41,8 +42,8 @@ GAMMAS = (0.97, 0.99)
 HELD_Z = 0.05  # m: an egg centre above this at the end is still in the hand (it rests at 0.022 on the counter)
 
 
-def run(episodes: int, accels, seed: int) -> dict:
-  env = tasks.make("pick_egg", **tasks.RL_SETTINGS["pick_egg"])
+def run(episodes: int, accels, seed: int, robot: str = "gripper") -> dict:
+  env = tasks.make("pick_egg", robot=robot, **tasks.RL_SETTINGS["pick_egg"])
   task = env.unwrapped
   names = ["unsafe"] + [f"safe, accel {a:g}" for a in accels]
   policies = [task.policy("unsafe")] + [task.policy("safe", safe_accel=a) for a in accels]
@@ -109,7 +110,13 @@ def main(argv=None) -> int:
   p.add_argument("--episodes", type=int, default=64)
   p.add_argument("--accels", default="0,3,4,5,6,8", help="safe carry acceleration limits, m/s² (0: full speed)")
   p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--robot", default="gripper",
+                 help=f"robot ({', '.join(tasks.robots.names())}; default gripper: the robot of the committed results)")
   a = p.parse_args(argv)
+  if a.robot not in tasks.robots.names():
+    raise ValueError(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if a.robot not in tasks.robots_for("pick_egg"):
+    raise ValueError(f"--robot: pick_egg supports {', '.join(tasks.robots_for('pick_egg'))} only, got {a.robot!r}")
   if isinstance(a.episodes, bool) or a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   try:
@@ -118,11 +125,13 @@ def main(argv=None) -> int:
     raise ValueError(f"accels: comma-separated numbers >= 0, got {a.accels!r}") from None
   if not accels or not all(0 <= x < 1e3 for x in accels):
     raise ValueError(f"accels: comma-separated numbers in [0, 1000), got {a.accels!r}")
-  res = run(a.episodes, accels, a.seed)
+  res = run(a.episodes, accels, a.seed, a.robot)
+  if a.robot != "gripper":  # the gripper's results stay as committed (no key, same file)
+    res["robot"] = a.robot
   res.update(command="PYTHONPATH=. .venv/bin/python benchmarks/egg_carry_sweep.py " + " ".join(
       shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])), jax=jax.__version__,
       backend=jax.default_backend(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), git=RP._git())
-  stem = os.path.join(RESULTS, "egg_carry_sweep")
+  stem = os.path.join(RESULTS, "egg_carry_sweep" + ("" if a.robot == "gripper" else f"_{a.robot}"))
   write_json(stem + ".json", res)
   write_text(stem + ".md", render_md(res))
   print(f"wrote {stem}.json / .md")

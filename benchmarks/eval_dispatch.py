@@ -52,11 +52,17 @@ import mjx_damage  # noqa: E402,F401  (XLA flags, compile cache)
 
 PARTITIONERS = ("shardy", "gspmd")
 MODES = ("one", "async", "threads", "spmd")
+ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may differ
 
 
 def parse(argv=None):
+  import tasks  # the registry's robots (no JAX backend starts here)
+
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--task", default="place_plate")
+  p.add_argument("--robot", default=ROBOT,
+                 help=f"robot of a registered --task, one of {', '.join(tasks.robots.names())} "
+                      f"(default {ROBOT}, the robot of the committed results)")
   p.add_argument("--episodes-per-device", type=int, default=4096 * 4,
                  help="episodes per device per call (multi_gpu.py's 4096 per level x 4 fragility levels)")
   p.add_argument("--fragility", default="0.5,1,2,4")
@@ -68,6 +74,14 @@ def parse(argv=None):
   p.add_argument("--sequence", default="shardy:one,shardy:async,shardy:one,shardy:async",
                  help="comma-separated PARTITIONER:MODE steps, timed in this order (module docstring)")
   a = p.parse_args(argv)
+  if a.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if ":" in a.task:  # an env class: no robot to pick
+    if a.robot != ROBOT:
+      p.error(f"--robot: only for a registered --task, not the env class {a.task!r}")
+  elif a.task in tasks.names() and a.robot not in tasks.robots_for(a.task):
+    p.error(f"--robot: task {a.task!r} supports {', '.join(tasks.robots_for(a.task))} only, not {a.robot!r}")
+  a.task_kwargs = None if ":" in a.task else {"robot": a.robot}
   a.sequence = [tuple(x.split(":")) for x in a.sequence.split(",")]
   bad = [":".join(x) for x in a.sequence if len(x) != 2 or x[0] not in PARTITIONERS or x[1] not in MODES]
   if bad:
@@ -93,7 +107,7 @@ def main(argv=None) -> int:
   from apps import resolve as R
   from train.envs import resolve_task, task_episode_length
 
-  env, _ = resolve_task(a.task)
+  env, _ = resolve_task(a.task, a.task_kwargs)
   T = task_episode_length(env)
   policy = R.make_policy("random", env)
   per, devs = a.episodes_per_device, jax.local_devices()

@@ -26,9 +26,11 @@ Per task (one command does everything):
    episodes: completion and safe completion (DAMAGE_MODEL.md §7), mean over seeds
    with a 95 % t-interval over seeds.
 
-Writes ``benchmarks/results/il_study_<device>[_<tag>].{json,md,png}`` (rewritten
+Writes ``benchmarks/results/il_study_<device>[_<robot>][_<tag>].{json,md,png}`` (rewritten
 after every regime, so a time limit keeps what was done; ``--resume`` skips the
-tasks completed in that JSON and runs an incomplete one again).
+tasks completed in that JSON and runs an incomplete one again). ``--robot`` (default
+the gripper, the robot of the committed results) is in the name and the config when
+not the gripper.
 
 GPU (full size; about 2–4 min per task on one H100 — run tasks in separate calls
 if one 10-minute call is too short: one ``--tag`` per call, then ``--combine``)::
@@ -76,6 +78,8 @@ VAL_SEED = 1  # validation episode keys (the evaluation's: seed 0)
 def parse(argv):
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
   p.add_argument("--tasks", default=",".join(TASKS), help="comma-separated task names")
+  p.add_argument("--robot", default="gripper",
+                 help="robot of every task (tasks.robots.names()); default gripper: the robot of the committed results")
   p.add_argument("--policy", choices=("flow", "bc"), default="flow")
   p.add_argument("--demos", type=int, default=None, help="episodes recorded per operator condition")
   p.add_argument("--seeds", type=int, default=None)
@@ -122,6 +126,11 @@ def parse(argv):
   bad = [t for t in args.tasks if t not in tasks.names()]
   if bad:
     p.error(f"--tasks: unknown {bad}; valid: {', '.join(tasks.names())}")
+  if args.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  other = [t for t in args.tasks if args.robot not in tasks.robots_for(t)]
+  if other:
+    p.error(f"--robot: {', '.join(other)} run(s) without {args.robot!r} (tasks.robots_for)")
   if not 0 <= args.min_health <= 100 or args.max_damage < 0:
     p.error("--min-health must be in [0, 100] and --max-damage >= 0")
   return args
@@ -184,7 +193,7 @@ def run_task(task, args, log, save=lambda out: None):
   from train import evaluate as E
   from train.record import record
 
-  env = tasks.make(task)
+  env = tasks.make(task, robot=args.robot)
   out = {"task": task, "timings": {}}
   t0 = time.perf_counter()
   demos, recorded = {}, {}
@@ -363,7 +372,8 @@ def combine(paths, results_dir, tag):
   slug = parts[0].get("device_slug")
   if not slug or any(p.get("device_slug") != slug for p in parts):
     raise ValueError("--combine: the files must come from one device (device_slug)")
-  base = os.path.join(results_dir, f"il_study_{slug}{'_' + tag if tag else ''}")
+  robot = parts[0]["config"].get("robot")  # one config, so one robot (the gripper's config names none)
+  base = os.path.join(results_dir, f"il_study_{slug}{'_' + robot if robot else ''}{'_' + tag if tag else ''}")
   if os.path.abspath(base + ".json") in {os.path.abspath(x) for x in paths}:
     raise ValueError(f"--combine: would overwrite its input {base}.json; pass another --tag")
   write_json(base + ".json", payload)
@@ -393,8 +403,13 @@ def main(argv=None) -> int:
   if len(args.temperature) > 1 and args.policy == "flow":
     config["val_episodes"] = args.val_episodes
   config["hidden"] = list(args.hidden)
+  # another robot in the config (so --resume and --combine keep robots apart) and the name; the gripper's
+  # config and names stay as committed
+  robot_part = ""
+  if args.robot != "gripper":
+    config["robot"], robot_part = args.robot, f"_{args.robot}"
   slug, device = device_info()
-  base = os.path.join(args.results_dir, f"il_study_{slug}{'_' + args.tag if args.tag else ''}")
+  base = os.path.join(args.results_dir, f"il_study_{slug}{robot_part}{'_' + args.tag if args.tag else ''}")
   payload = {"device": device, "device_slug": slug, "jax": jax.__version__, "config": config, "tasks": [],
              "command": "python " + " ".join(shlex.quote(a) for a in [os.path.relpath(__file__, ROOT)] + sys.argv[1:]),
              "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}

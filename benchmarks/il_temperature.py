@@ -11,7 +11,8 @@ validation episodes instead of fixing it: no single value suits every task.
     PYTHONPATH=. .venv/bin/python benchmarks/il_temperature.py --task shelve_item
     PYTHONPATH=. .venv/bin/python benchmarks/il_temperature.py --task pick_egg
 
-Writes ``benchmarks/results/il_temperature_<task>_<device>.{json,md}`` with the command.
+Writes ``benchmarks/results/il_temperature_<task>[_<robot>]_<device>.{json,md}`` with the command
+(``--robot``: default the gripper, the robot of the committed results; named only when another).
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from mjx_damage import runtime  # noqa: E402
 def parse(argv):
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
   p.add_argument("--task", default="shelve_item")
+  p.add_argument("--robot", default="gripper",
+                 help="robot of the task (tasks.robots.names()); default gripper: the robot of the committed results")
   p.add_argument("--operator", default="careful", help="careful, careless or mixed")
   p.add_argument("--demos", type=int, default=128, help="episodes recorded (the successful ones are kept)")
   p.add_argument("--seeds", type=int, default=2)
@@ -44,6 +47,10 @@ def parse(argv):
 
   if a.task not in tasks.names():
     p.error(f"--task: unknown {a.task!r}; valid: {', '.join(tasks.names())}")
+  if a.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if a.robot not in tasks.robots_for(a.task):
+    p.error(f"--robot: {a.task} supports {', '.join(tasks.robots_for(a.task))} only, got {a.robot!r}")
   if a.operator not in operators.CONDITIONS:
     p.error(f"--operator: one of {', '.join(operators.CONDITIONS)}, got {a.operator!r}")
   for k in ("demos", "seeds", "steps", "eval_episodes"):
@@ -72,7 +79,7 @@ def main(argv=None) -> int:
 
   hidden = (512, 512, 512)
   t0 = time.perf_counter()
-  env = tasks.make(a.task)
+  env = tasks.make(a.task, robot=a.robot)
   ds = C.successful(record(env, operators.make(env, a.operator), a.demos, seed=1000, task=a.task, chunk=64))
   res = flow_policy.train_flow(ds, list(range(a.seeds)), a.steps, 256, hidden=hidden)
   apply = flow_policy.flow_apply(env.action_size, flow_policy.CHUNK, hidden, temperature=None)
@@ -92,11 +99,13 @@ def main(argv=None) -> int:
   slug, device = runtime.device_info()
   command = "PYTHONPATH=. .venv/bin/python benchmarks/il_temperature.py " + " ".join(
       shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
-  doc = {"command": command.strip(), "device": device, "task": a.task, "operator": a.operator,
+  # the robot in the results and the name only when not the gripper (those stay as committed)
+  robot_meta, robot_part = ({}, "") if a.robot == "gripper" else ({"robot": a.robot}, f"_{a.robot}")
+  doc = {"command": command.strip(), "device": device, "task": a.task, **robot_meta, "operator": a.operator,
          "demos_recorded": a.demos, "demos_kept": ds.num_episodes, "seeds": a.seeds, "steps": a.steps,
          "hidden": list(hidden), "eval_episodes": a.eval_episodes, "rows": rows,
          "wall_s": round(time.perf_counter() - t0, 1), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-  base = os.path.join(a.results_dir, f"il_temperature_{a.task}_{slug}")
+  base = os.path.join(a.results_dir, f"il_temperature_{a.task}{robot_part}_{slug}")
   os.makedirs(a.results_dir, exist_ok=True)
   write_json(base + ".json", doc)
   lines = [f"# Flow policy: completion against sampling temperature ({a.task}, {device})", "",

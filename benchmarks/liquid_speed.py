@@ -15,7 +15,9 @@ The liquid is most of pour_water's step on a GPU (``step_overhead.py``: 83 % at
 Rates are particle-substeps/s and the env-steps/s they allow at the task's
 ``n_substeps`` (liquid only). ``--hlo-dir`` writes the optimised HLO of each
 variant (what XLA fused, and which [envs, P, P] or [envs, P, G] intermediates
-reach memory) and XLA's cost analysis (bytes accessed) goes in every row.
+reach memory) and XLA's cost analysis (bytes accessed) goes in every row. ``--robot``
+(default the gripper, the robot of the committed results) other than the gripper is in
+the results, their default name and the HLO file names.
 
     python benchmarks/liquid_speed.py --envs 32768 --out $OUT/liquid_speed_gpu.json --hlo-dir $OUT/hlo
     python benchmarks/liquid_speed.py --envs 64 --substeps 6 --out /tmp/liquid_speed.json     # CPU smoke
@@ -56,13 +58,14 @@ def variant_model(lm, variant: str):
   raise ValueError(f"variant: unknown {variant!r}; valid: {', '.join(VARIANTS)}")
 
 
-def measure(task_name: str, variant: str, envs: int, substeps: int, repeats: int, hlo_dir: str | None) -> dict:
+def measure(task_name: str, variant: str, envs: int, substeps: int, repeats: int, hlo_dir: str | None,
+            robot: str = "gripper") -> dict:
   import jax
 
   import tasks
   from mjx_damage import liquid as Lq
 
-  env = tasks.make(task_name)
+  env = tasks.make(task_name, robot=robot)
   task = env.unwrapped
   b = task.damage_binding
   if b.liquid is None:
@@ -85,7 +88,8 @@ def measure(task_name: str, variant: str, envs: int, substeps: int, repeats: int
   cost = cost[0] if isinstance(cost, (list, tuple)) else (cost or {})
   if hlo_dir:
     os.makedirs(hlo_dir, exist_ok=True)
-    with open(os.path.join(hlo_dir, f"{task_name}_{variant}.hlo.txt"), "w") as f:
+    robot_part = "" if robot == "gripper" else f"_{robot}"
+    with open(os.path.join(hlo_dir, f"{task_name}{robot_part}_{variant}.hlo.txt"), "w") as f:
       f.write(compiled.as_text())
   ds = jax.block_until_ready(compiled(ds))
   best = float("inf")
@@ -112,6 +116,8 @@ def measure(task_name: str, variant: str, envs: int, substeps: int, repeats: int
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   ap.add_argument("--task", default="pour_water")
+  ap.add_argument("--robot", default="gripper",
+                  help="robot of the task (tasks.robots.names()); default gripper: the robot of the committed results")
   ap.add_argument("--variants", default=",".join(VARIANTS))
   ap.add_argument("--envs", type=int, default=4096)
   ap.add_argument("--substeps", type=int, default=12)
@@ -131,11 +137,19 @@ def main(argv=None) -> int:
   import tasks
   if args.task not in tasks.names():
     ap.error(f"--task: unknown {args.task!r}")
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if args.robot not in tasks.robots_for(args.task):
+    ap.error(f"--robot: {args.task} supports {', '.join(tasks.robots_for(args.task))} only, got {args.robot!r}")
   dev = jax.devices()[0]
-  rows = [measure(args.task, v, args.envs, args.substeps, args.repeats, args.hlo_dir) for v in variants]
+  rows = [measure(args.task, v, args.envs, args.substeps, args.repeats, args.hlo_dir, args.robot) for v in variants]
   result = {"command": "python benchmarks/liquid_speed.py " + shlex.join(sys.argv[1:] if argv is None else argv),
             "device": f"{dev.platform}:{dev.device_kind}", "rows": rows}
-  out = args.out or os.path.join(HERE, "results", f"liquid_speed_{dev.platform}.json")
+  # the robot in the results and the default name only when not the gripper (those stay as committed)
+  robot_part = ""
+  if args.robot != "gripper":
+    result["robot"], robot_part = args.robot, f"_{args.robot}"
+  out = args.out or os.path.join(HERE, "results", f"liquid_speed_{dev.platform}{robot_part}.json")
   os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
   with open(out, "w") as f:
     json.dump(result, f, indent=1)

@@ -22,7 +22,9 @@ the laptop, then carry it to the cup) and writes:
   wetness over the episode.
 
 Deterministic for a given seed (CPU); the command line is written into
-``docs/figures/README.md`` beside the figures.
+``docs/figures/README.md`` beside the figures. ``--robot`` (default the gripper, the
+robot of the README's figures) other than the gripper writes to
+``docs/figures/seeing_damage_<robot>/`` unless ``--out`` is given.
 """
 
 from __future__ import annotations
@@ -47,6 +49,11 @@ from mjx_damage.io import atomic_path, write_text  # noqa: E402
 FIGURES = ("place_plate", "pour_water")
 
 
+def _who(args) -> str:
+  """The robot for titles and README lines, only when not the gripper (the committed figures' text stays)."""
+  return "" if args.robot == "gripper" else f", {args.robot}"
+
+
 def place_plate_figures(args, out_dir):
   """Place Plate, scripted unsafe: three frames, the rollout plots, a small GIF. Returns (paths, README lines)."""
   import tasks
@@ -55,9 +62,9 @@ def place_plate_figures(args, out_dir):
   from mjx_damage import plots
   from mjx_damage.render import render_rollout, write_video
 
-  env = tasks.make("place_plate")
+  env = tasks.make("place_plate", robot=args.robot)
   policy = tasks.scripted_policy(env, "unsafe")
-  steps = tasks.default_config("place_plate")["episode_length"]
+  steps = env.unwrapped.episode_length  # the robot's: the default_config's for the gripper, longer for the Panda
   res = render_rollout(env, policy, steps=steps, seed=args.seed, width=args.width, height=args.height)
   traj, frames = res.trajectory, res.frames[0]
   plate = traj.entity_names.index("plate")
@@ -74,7 +81,7 @@ def place_plate_figures(args, out_dir):
     Image.fromarray(strip).save(tmp_png, optimize=True)
 
   with tempfile.TemporaryDirectory() as tmp:
-    paths = plots.plot_rollout(traj, tmp, title=f"Place Plate, scripted unsafe policy (seed {args.seed})")
+    paths = plots.plot_rollout(traj, tmp, title=f"Place Plate, scripted unsafe policy (seed {args.seed}{_who(args)})")
     plot_png = os.path.join(out_dir, "place_plate_unsafe_rollout.png")
     shutil.copy(paths["rollout"], plot_png)
 
@@ -82,7 +89,7 @@ def place_plate_figures(args, out_dir):
   small = np.stack([np.asarray(Image.fromarray(f).resize((args.width // 2, args.height // 2), Image.LANCZOS))
                     for f in frames[::2]])
   gif = write_video(small, os.path.join(out_dir, "place_plate_unsafe.gif"), fps=0.5 / traj.dt)
-  lines = [f"Place Plate, `scripted:unsafe`, seed {args.seed}, {steps} steps, {args.width}×{args.height}:",
+  lines = [f"Place Plate, `scripted:unsafe`, seed {args.seed}{_who(args)}, {steps} steps, {args.width}×{args.height}:",
            f"- `place_plate_unsafe_frames.png`: steps {picks[0]}, {picks[1]}, {picks[2]} "
            f"(impact at step {t_hit}); final plate health {traj.entity_health[-1, 0, plate]:.1f}.",
            "- `place_plate_unsafe_rollout.png`: health, contact load on the most damaged link, damage per step.",
@@ -98,9 +105,9 @@ def pour_water_figures(args, out_dir):
   from mjx_damage import plots
   from mjx_damage.render import render_rollout
 
-  env = tasks.make("pour_water")
+  env = tasks.make("pour_water", robot=args.robot)
   policy = tasks.scripted_policy(env, "unsafe")
-  steps = tasks.default_config("pour_water")["episode_length"]
+  steps = env.unwrapped.episode_length  # the robot's: the default_config's for the gripper, longer for the Panda
   w, h = 2 * args.width, 2 * args.height  # particles are 6 mm: a larger frame shows them
   res = render_rollout(env, policy, steps=steps, seed=args.seed, width=w, height=h)
   traj, frames = res.trajectory, res.frames[0]
@@ -113,10 +120,10 @@ def pour_water_figures(args, out_dir):
   with atomic_path(png, ".png") as tmp_png:
     Image.fromarray(frames[t_wet]).save(tmp_png, optimize=True)
   with tempfile.TemporaryDirectory() as tmp:
-    paths = plots.plot_rollout(traj, tmp, title=f"Pour Water, scripted unsafe policy (seed {args.seed})")
+    paths = plots.plot_rollout(traj, tmp, title=f"Pour Water, scripted unsafe policy (seed {args.seed}{_who(args)})")
     plot_png = os.path.join(out_dir, "pour_water_rollout.png")
     shutil.copy(paths["rollout"], plot_png)
-  lines = [f"Pour Water, `scripted:unsafe`, seed {args.seed}, {steps} steps, {w}×{h}:",
+  lines = [f"Pour Water, `scripted:unsafe`, seed {args.seed}{_who(args)}, {steps} steps, {w}×{h}:",
            f"- `pour_water_liquid.png`: step {t_wet} ({t_wet * traj.dt:.2f} s), {wet[t_wet]:.0f} of "
            f"{traj.particles.shape[2]} particles touching the laptop (peak {wet.max():.0f}); laptop health "
            f"{traj.entity_health[t_wet, 0, laptop]:.1f} there, {traj.entity_health[-1, 0, laptop]:.1f} at the end.",
@@ -126,13 +133,27 @@ def pour_water_figures(args, out_dir):
 
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-  ap.add_argument("--out", default=os.path.join(ROOT, "docs", "figures"))
+  ap.add_argument("--out", default=None,
+                  help="output directory (default docs/figures; another --robot: docs/figures/seeing_damage_<robot>)")
+  ap.add_argument("--robot", default="gripper",
+                  help="robot of both tasks (tasks.robots.names()); default gripper: the robot of the committed "
+                       "figures")
   ap.add_argument("--seed", type=int, default=0)
   ap.add_argument("--width", type=int, default=400)
   ap.add_argument("--height", type=int, default=300)
   ap.add_argument("--figures", nargs="+", choices=FIGURES, default=list(FIGURES),
                   help="which figure sets to regenerate (README lines of the others are kept)")
   args = ap.parse_args(argv)
+  import tasks
+
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  other = [n for n in args.figures if args.robot not in tasks.robots_for(n)]
+  if other:
+    ap.error(f"--robot: {', '.join(other)} run(s) without {args.robot!r} (tasks.robots_for)")
+  if args.out is None:  # another robot's figures beside the README's, not over them
+    sub = [] if args.robot == "gripper" else [f"seeing_damage_{args.robot}"]
+    args.out = os.path.join(ROOT, "docs", "figures", *sub)
   os.makedirs(args.out, exist_ok=True)
   makers = {"place_plate": place_plate_figures, "pour_water": pour_water_figures}
   cmd = "python benchmarks/make_figures.py" + "".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:]))

@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/memory_estimate.py                         # CPU, 3 tasks
     .venv/bin/python benchmarks/memory_estimate.py --tasks place_plate --sizes 8,32
+    .venv/bin/python benchmarks/memory_estimate.py --robot panda          # → memory_estimate_panda_<device>
 
 For each task: compile the evaluation program (``train.evaluate.Evaluator``) and one
 training iteration (``train.iteration.Trainer``, S = 1 seed, num_rollouts = 1) at
@@ -10,7 +11,8 @@ temporaries, bytes), and take the slope per env between the sizes — the part t
 grows with the batch, which is what the estimate must bound. Reported: that
 slope divided by one env's state bytes (the factor ``train.memory`` needs), and
 the estimate's slope; ``bound`` says whether the estimate is at least the
-measurement. Writes ``benchmarks/results/memory_estimate_<device>.{json,md}``.
+measurement. Writes ``benchmarks/results/memory_estimate_<device>.{json,md}`` (``--robot`` other
+than the gripper: ``memory_estimate_<robot>_<device>``, the robot in the JSON).
 """
 
 from __future__ import annotations
@@ -69,12 +71,21 @@ def main(argv=None) -> int:
   ap.add_argument("--tasks", default="place_plate,pour_water,shelve_item")
   ap.add_argument("--sizes", default="8,32", help="two batch sizes (envs / episodes), multiples of 4")
   ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  ap.add_argument("--robot", default="gripper",
+                  help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
+                       "the robot of the committed results)")
   args = ap.parse_args(argv)
+  # checked before anything compiles; the gripper is passed explicitly (tasks.robots.DEFAULT may change)
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  for task in args.tasks.split(","):
+    if task in tasks.names() and args.robot not in tasks.robots_for(task):
+      ap.error(f"--robot: task {task!r} supports {', '.join(tasks.robots_for(task))} only, got {args.robot!r}")
   lo, hi = (int(s) for s in args.sizes.split(","))
   slug, desc = device_info()
   rows = []
   for task in args.tasks.split(","):
-    env = tasks.make(task)
+    env = tasks.make(task, robot=args.robot)
     fp = MEM.footprint(env)
     state = fp.state
     t0 = time.perf_counter()
@@ -105,8 +116,11 @@ def main(argv=None) -> int:
   result = {"command": cmd.strip(), "device": desc, "sizes": [lo, hi], "factors": {
       "K_EVAL": MEM.K_EVAL, "K_TRAIN_STATE": MEM.K_TRAIN_STATE, "K_TRAIN_DATA": MEM.K_TRAIN_DATA,
       "K_PAIRS": MEM.K_PAIRS}, "rows": rows}
+  robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
+  if robot:
+    result["robot"] = args.robot
   os.makedirs(args.results_dir, exist_ok=True)
-  base = os.path.join(args.results_dir, f"memory_estimate_{slug}")
+  base = os.path.join(args.results_dir, f"memory_estimate_{robot}{slug}")
   write_json(base + ".json", result)
   lines = [f"# Memory estimate vs XLA's memory analysis ({desc})", "", f"Command: `{result['command']}`", "",
            f"Slope per env between {lo} and {hi} envs/episodes of XLA's `memory_analysis()` (arguments + outputs "

@@ -22,7 +22,8 @@ rollout (env steps + inference) and update (SGD with its all-reduces), and the
 JSON keeps every repeat's first-iteration (compile) time.
 
 Writes ``benchmarks/results/multi_gpu_<device>.json`` and ``.md`` (rates per
-repeat, mean, min–max spread, speedup over 1 device) and ``_curves.png``.
+repeat, mean, min–max spread, speedup over 1 device) and ``_curves.png``
+(``multi_gpu_<robot>_<device>.*`` with ``--robot`` other than the gripper).
 
 GPU (one node with 2 GPUs; the device tool's ``nvidia-h200-x2``), one command::
 
@@ -65,12 +66,19 @@ os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cach
 from mjx_damage import io, runtime  # noqa: E402
 from train import distributed  # noqa: E402
 
+ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may differ
 CURVE_KEYS = ("eval/safe_completion", "eval/completion", "eval/episode_cost", "eval/task_return")
 
 
 def parse(argv=None):
+  import tasks  # the registry's robots (no JAX backend starts here: distributed.initialize comes first)
+
   p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--task", default="place_plate", help="registered task, or package.module:EnvClass")
+  p.add_argument("--robot", default=ROBOT,
+                 help=f"robot of a registered --task, one of {', '.join(tasks.robots.names())} "
+                      f"(default {ROBOT}, the robot of the committed results; another robot writes "
+                      "multi_gpu_<robot>_<device>.*)")
   p.add_argument("--devices", default="1,all", help="comma-separated device counts (all: every local device)")
   p.add_argument("--preset", default="playground")
   p.add_argument("--envs-per-device", type=int, default=None, help="training envs per device (default: the preset's)")
@@ -99,6 +107,14 @@ def parse(argv=None):
                  help="merge into an earlier results file: keep its other device counts, and the parts of these "
                       "device counts that this call does not time (each part records its own command)")
   args = p.parse_args(argv)
+  if args.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if ":" in args.task:  # an env class: no robot to pick
+    if args.robot != ROBOT:
+      p.error(f"--robot: only for a registered --task, not the env class {args.task!r}")
+  elif args.task in tasks.names() and args.robot not in tasks.robots_for(args.task):
+    p.error(f"--robot: task {args.task!r} supports {', '.join(tasks.robots_for(args.task))} only, not {args.robot!r}")
+  args.task_kwargs = None if ":" in args.task else {"robot": args.robot}
   try:
     args.setup = distributed.check(None, args.coordinator, args.num_processes, args.process_id)
   except ValueError as e:
@@ -154,7 +170,7 @@ def train_runs(args, d: int, save=lambda part: None) -> dict:
   rates, compiles, curve, res = [], [], None, None
   for r in range(args.repeats):
     res = train(args.task, preset=args.preset, seeds=args.seeds, devices=d, progress=False, plot=False,
-                profile=args.profile and r == args.repeats - 1, **sizes)
+                task_kwargs=args.task_kwargs, profile=args.profile and r == args.repeats - 1, **sizes)
     rates.append(res.throughput)
     compiles.append(res.timings["compile"])
     if curve is None:
@@ -182,7 +198,7 @@ def eval_runs(args, d: int, save=lambda part: None) -> dict:
   from apps import resolve as R
   from train.envs import resolve_task, task_episode_length
 
-  env, _ = resolve_task(args.task)
+  env, _ = resolve_task(args.task, args.task_kwargs)
   T = task_episode_length(env)
   policy = R.make_policy(args.policy, env)
   episodes = args.eval_episodes_per_device * d
@@ -284,7 +300,8 @@ def main(argv=None) -> int:
   slug, device = runtime.device_info()
   procs = jax.process_count()
   counts = device_counts(args.devices, jax.device_count(), procs)
-  base = os.path.join(args.results_dir, f"multi_gpu_{slug}" + (f"_{procs}proc" if procs > 1 else ""))
+  robot = "" if args.robot == ROBOT else args.robot + "_"  # the gripper's names as before --robot
+  base = os.path.join(args.results_dir, f"multi_gpu_{robot}{slug}" + (f"_{procs}proc" if procs > 1 else ""))
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/multi_gpu.py"] + list(sys.argv[1:] if argv is None else argv))
   payload = {"device": device, "jax": jax.__version__, "task": args.task, "repeats": args.repeats, "processes": procs,
              "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}

@@ -13,8 +13,10 @@ differences in static force).
 
     python benchmarks/native_agreement.py                  # every task, its episode length
     python benchmarks/native_agreement.py --tasks pick_egg --steps 30
+    python benchmarks/native_agreement.py --robot panda     # every task the Panda runs
 
-Writes ``benchmarks/results/native_agreement_<device>.{json,md}`` (``--out-dir``).
+Writes ``benchmarks/results/native_agreement_<device>.{json,md}`` (``--out-dir``; ``--robot`` other than the
+gripper: ``native_agreement_<robot>_<device>``, the robot in the metadata).
 """
 
 from __future__ import annotations
@@ -39,8 +41,8 @@ def _first_below(h: np.ndarray, level: float) -> list:
   return [int(i) if b else None for i, b in zip(below.argmax(0), below.any(0))]
 
 
-def compare(name: str, style: str, steps: int | None) -> dict:
-  env = tasks.make(name)
+def compare(name: str, style: str, steps: int | None, robot: str = "gripper") -> dict:
+  env = tasks.make(name, robot=robot)
   steps = steps or env.unwrapped.episode_length
   policy, step = jax.jit(tasks.scripted_policy(env, style)), jax.jit(env.step)
   s = jax.jit(env.reset)(jax.random.PRNGKey(0))
@@ -88,23 +90,34 @@ def markdown(rows: list, meta: dict) -> str:
 
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-  ap.add_argument("--tasks", default=",".join(tasks.names()))
+  ap.add_argument("--tasks", default=None, help="comma-separated (default: every task --robot runs)")
   ap.add_argument("--policy", default="unsafe", choices=("safe", "unsafe"))
   ap.add_argument("--steps", type=int, default=None, help="control steps (default: each task's episode length)")
   ap.add_argument("--out-dir", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results"))
+  ap.add_argument("--robot", default="gripper",
+                  help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
+                       "the robot of the committed results)")
   args = ap.parse_args(argv)
-  names = [n for n in args.tasks.split(",") if n]
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  names = ([n for n in args.tasks.split(",") if n] if args.tasks is not None
+           else [n for n in tasks.names() if args.robot in tasks.robots_for(n)])
   for n in names:
     if n not in tasks.names():
       ap.error(f"tasks: unknown task {n!r}; valid: {', '.join(tasks.names())}")
+    if args.robot not in tasks.robots_for(n):
+      ap.error(f"--robot: task {n!r} supports {', '.join(tasks.robots_for(n))} only, got {args.robot!r}")
   rows = []
   for n in names:
-    rows.append(compare(n, args.policy, args.steps))
+    rows.append(compare(n, args.policy, args.steps, args.robot))
     print(rows[-1], flush=True)
   slug, device = runtime.device_info()
   meta = {"device": device, "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
           "command": "python benchmarks/native_agreement.py " + shlex.join(argv if argv is not None else sys.argv[1:])}
-  base = os.path.join(args.out_dir, f"native_agreement_{slug}")
+  robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
+  if robot:
+    meta["robot"] = args.robot
+  base = os.path.join(args.out_dir, f"native_agreement_{robot}{slug}")
   io.write_json(base + ".json", {"meta": meta, "rows": rows})
   io.write_text(base + ".md", markdown(rows, meta))
   print(f"wrote {base}.json, {base}.md")

@@ -23,7 +23,9 @@
    pipeline (:mod:`mjx_damage.reference`: native MuJoCo one env at a time, per-entity
    Python damage evaluators; ``--ref-envs``, capped at ``--ref-max-s``), same steps.
 
-Writes ``benchmarks/results/native_backend_<platform>.{json,md}`` (``--out`` overrides the stem); a
+``--robot`` (default the gripper) is the robot of every task of sections 1-3; another robot writes
+``native_backend_<robot>_<platform>`` (the robot in the JSON). Writes
+``benchmarks/results/native_backend_<platform>.{json,md}`` (``--out`` overrides the stem); a
 section this run skips (``--skip-throughput``/``--skip-peaks``/``--skip-separation``) is kept from the existing JSON, and
 each section records the command and date that produced it.
 
@@ -59,15 +61,16 @@ from train import evaluate as E  # noqa: E402
 RESULTS = os.path.join(os.path.dirname(__file__), "results")
 
 
-def native_tasks() -> list[str]:
-  """Registered tasks the native backend runs (``tasks.native.supports``: every task since it has the
-  temperature model; files before that list the heat-source tasks under ``not_native``)."""
-  return [name for name in tasks.names() if tasks.native.supports(tasks.make(name))]
+def native_tasks(robot: str = "gripper") -> list[str]:
+  """Registered tasks ``robot`` runs that the native backend runs (``tasks.native.supports``: every task since
+  it has the temperature model; files before that list the heat-source tasks under ``not_native``)."""
+  return [name for name in tasks.names()
+          if robot in tasks.robots_for(name) and tasks.native.supports(tasks.make(name, robot=robot))]
 
 
-def throughput(task: str, envs: int, steps: int, repeats: int, threads: int) -> dict:
+def throughput(task: str, envs: int, steps: int, repeats: int, threads: int, robot: str = "gripper") -> dict:
   """Evaluation env-steps/s of both backends: ``envs`` episodes of ``steps`` steps, scripted unsafe policy."""
-  env = tasks.make(task)
+  env = tasks.make(task, robot=robot)
   nenv = tasks.native.wrap(env, envs, nthread=threads)
   policy = tasks.scripted_policy(env, "unsafe")
   evs = {"mjx": E.Evaluator(env, policy, steps), "native": E.NativeEvaluator(nenv, policy, steps)}
@@ -94,10 +97,10 @@ def throughput(task: str, envs: int, steps: int, repeats: int, threads: int) -> 
   }
 
 
-def peaks(task: str, envs: int, steps: int, threads: int) -> dict:
+def peaks(task: str, envs: int, steps: int, threads: int, robot: str = "gripper") -> dict:
   """Largest per-substep F∥ (N) on each tracked link over ``steps`` steps of the scripted unsafe policy,
   mean over ``envs`` episodes, on both backends (same resets and action keys)."""
-  env = tasks.make(task)
+  env = tasks.make(task, robot=robot)
   nenv = tasks.native.wrap(env, envs, nthread=threads)
   policy = jax.jit(jax.vmap(tasks.scripted_policy(env, "unsafe")))
   step = {"mjx": jax.jit(jax.vmap(env.step)), "native": nenv.step}
@@ -154,10 +157,11 @@ def boxes(ks: list[int], envs: int, steps: int, repeats: int, threads: int, ref_
   return rows
 
 
-def separation(names: list[str], episodes: int, envs: int, threads: int, seed: int, tol: float) -> list[dict]:
+def separation(names: list[str], episodes: int, envs: int, threads: int, seed: int, tol: float,
+               robot: str = "gripper") -> list[dict]:
   rows = []
   for name in names:
-    env = tasks.make(name)
+    env = tasks.make(name, robot=robot)
     nenv = tasks.native.wrap(env, min(envs, episodes), nthread=threads)
     for style in tasks.STYLES:
       policy = tasks.scripted_policy(env, style)
@@ -285,7 +289,16 @@ def main(argv=None) -> int:
   p.add_argument("--ref-max-s", type=float, default=10.0, help="stop starting reference envs after this long")
   p.add_argument("--peak-envs", type=int, default=8)
   p.add_argument("--out", default=None, help="output stem (default benchmarks/results/native_backend_<platform>)")
+  p.add_argument("--robot", default="gripper",
+                 help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
+                      "the robot of the committed results; the K-box scene has none)")
   args = p.parse_args(argv)
+  # checked before anything is built; the gripper is passed explicitly (tasks.robots.DEFAULT may change)
+  if args.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if not (args.skip_throughput and args.skip_peaks) and args.task in tasks.names() and (
+      args.robot not in tasks.robots_for(args.task)):
+    p.error(f"--robot: task {args.task!r} supports {', '.join(tasks.robots_for(args.task))} only, got {args.robot!r}")
   try:
     args.box_ks = [int(k) for k in args.boxes.split(",") if k.strip()]
   except ValueError:
@@ -297,28 +310,34 @@ def main(argv=None) -> int:
   if not args.ref_max_s > 0:  # NaN too
     p.error(f"--ref-max-s: must be > 0 s, got {args.ref_max_s}")
   if not args.skip_separation:  # checked before anything runs
-    runnable = native_tasks()
+    runnable = native_tasks(args.robot)
     names = [n for n in args.tasks.split(",") if n] or runnable
     for n in names:
       if n not in tasks.names():
         p.error(f"--tasks: unknown task {n!r}")
+      if args.robot not in tasks.robots_for(n):
+        p.error(f"--tasks: task {n!r} supports {', '.join(tasks.robots_for(n))} only, not --robot {args.robot}")
       if n not in runnable:
         p.error(f"--tasks: the native backend does not run {n}")
   _, desc = device_info()
   command = "python benchmarks/native_backend.py " + shlex.join(sys.argv[1:] if argv is None else argv)
-  stem = args.out or os.path.join(RESULTS, f"native_backend_{jax.default_backend()}")
+  robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
+  stem = args.out or os.path.join(RESULTS, f"native_backend_{robot}{jax.default_backend()}")
   res = {}
   if os.path.exists(stem + ".json"):
     with open(stem + ".json") as f:
       res = json.load(f)
   date = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
   res.update({"command": command, "device": desc, "date": date, "cpu_count": os.cpu_count()})
+  old_robot = res.pop("robot", "gripper")  # files without it: the gripper
+  if robot:
+    res["robot"] = args.robot
   if not args.skip_throughput:
-    res["throughput"] = throughput(args.task, args.envs, args.steps, args.repeats, args.threads)
+    res["throughput"] = throughput(args.task, args.envs, args.steps, args.repeats, args.threads, args.robot)
     res["throughput"].update(command=command, date=date)
     print({k: v for k, v in res["throughput"].items() if k != "runs"}, flush=True)
   if not args.skip_peaks:
-    res["peaks"] = peaks(args.task, args.peak_envs, args.steps, args.threads)
+    res["peaks"] = peaks(args.task, args.peak_envs, args.steps, args.threads, args.robot)
     res["peaks"].update(command=command, date=date)
     print(res["peaks"], flush=True)
   if args.box_ks:
@@ -326,10 +345,11 @@ def main(argv=None) -> int:
                          args.ref_max_s)
     res.update(boxes_command=command, boxes_date=date)
   if not args.skip_separation:
-    rows = separation(names, args.episodes, args.envs, args.threads, args.seed, args.tolerance)
+    rows = separation(names, args.episodes, args.envs, args.threads, args.seed, args.tolerance, args.robot)
     old = res.get("separation") or []
-    if args.tasks and old and (res.get("seed"), res.get("tolerance"), old[0]["episodes"]) == (
-        args.seed, args.tolerance, args.episodes):  # a subset: its rows replace those tasks' rows, the others stay
+    # a subset of the same setting (robot too): its rows replace those tasks' rows, the others stay
+    if args.tasks and old and (res.get("seed"), res.get("tolerance"), old[0]["episodes"], old_robot) == (
+        args.seed, args.tolerance, args.episodes, args.robot):
       kept = [r for r in old if r["task"] not in names]
       rows = sorted(kept + rows, key=lambda r: (tasks.names().index(r["task"]), r["policy"]))
       runs = separation_runs(res) + [{"command": command, "date": date, "tasks": names}]
@@ -337,7 +357,8 @@ def main(argv=None) -> int:
       runs = [{"command": command, "date": date}]
     for legacy in ("separation_command", "separation_date"):  # files before separation_runs
       res.pop(legacy, None)
-    res.update(separation=rows, separation_runs=runs, not_native=[n for n in tasks.names() if n not in runnable],
+    res.update(separation=rows, separation_runs=runs,
+               not_native=[n for n in tasks.names() if n not in runnable and args.robot in tasks.robots_for(n)],
                seed=args.seed, tolerance=args.tolerance)
   write_json(stem + ".json", res, indent=1)
   write_text(stem + ".md", markdown(res))

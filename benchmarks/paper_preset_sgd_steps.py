@@ -8,6 +8,9 @@ iteration: the SGD steps taken of the 80, the update's own KL and brax's KL betw
 logits the rollout recorded, both before the first step when only that step is taken.
 
     python benchmarks/paper_preset_sgd_steps.py [--envs 32] [--iterations 4] [--out benchmarks/results/paper_preset_sgd_steps_cpu.md]
+
+``--robot`` (default the gripper, the committed results' robot): another robot's default ``--out`` is
+``paper_preset_sgd_steps_<robot>_cpu.md``.
 """
 
 from __future__ import annotations
@@ -26,8 +29,17 @@ def parse(argv):
   p.add_argument("--envs", type=int, default=32, help="envs per iteration (the preset's 512-step rollouts)")
   p.add_argument("--iterations", type=int, default=4)
   p.add_argument("--seed", type=int, default=0)
-  p.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "paper_preset_sgd_steps_cpu.md"))
+  p.add_argument("--out", default=None, help="default benchmarks/results/paper_preset_sgd_steps_cpu.md "
+                 "(another --robot: paper_preset_sgd_steps_<robot>_cpu.md)")
+  p.add_argument("--robot", default="gripper",
+                 help="robot of the task (tasks.robots.names(); default: gripper, the robot of the committed results)")
   a = p.parse_args(argv)
+  from tasks import robots  # checked before anything compiles; the gripper is passed explicitly (DEFAULT may change)
+  if a.robot not in robots.names():
+    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(robots.names())}")
+  if a.out is None:
+    robot = "" if a.robot == "gripper" else f"{a.robot}_"  # gripper: the committed results' name
+    a.out = os.path.join(ROOT, "benchmarks", "results", f"paper_preset_sgd_steps_{robot}cpu.md")
   if a.envs < 8 or a.envs % 8:
     p.error(f"--envs: a positive multiple of 8 (the preset's 8 minibatches), got {a.envs}")
   if a.iterations < 1:
@@ -40,7 +52,8 @@ def run(order_after: bool, a) -> list[dict]:
   import train
 
   steps = a.envs * 512
-  res = train.train("place_plate", task_kwargs=tasks.rl_settings("place_plate"), preset="paper", seed=a.seed,
+  task_kwargs = {**tasks.rl_settings("place_plate"), "robot": a.robot}
+  res = train.train("place_plate", task_kwargs=task_kwargs, preset="paper", seed=a.seed,
                     num_envs=a.envs, num_timesteps=a.iterations * steps, eval_every=steps, num_eval_envs=8,
                     normalizer_after_update=order_after, progress=False)
   return [{k: r[k] for k in ("iteration", "env_steps", "sgd_steps", "loss/kl_update", "loss/kl_mean")}

@@ -9,9 +9,10 @@ a held plate set down at full speed is damaged as badly as a short drop, at a qu
 
 Usage::
 
-    python benchmarks/place_plate_touchdown.py [--episodes 8]
+    python benchmarks/place_plate_touchdown.py [--episodes 8] [--robot panda]
 
-Writes ``benchmarks/results/place_plate_touchdown.{json,md}`` with the command.
+Writes ``benchmarks/results/place_plate_touchdown.{json,md}`` with the command (``--robot`` other than the
+gripper: ``place_plate_touchdown_<robot>``, the robot in the JSON).
 """
 from __future__ import annotations
 
@@ -50,7 +51,8 @@ def rollout_fn(env, speed: float, open_at):
 
     def body(s, t):
       grip = jnp.where(open_at is not None and t >= (open_at or 0), 1.0, 0.0)
-      s = env.step(s, jnp.array([0.0, 0.0, -speed, 0.0]).at[3].set(grip))
+      # [Δx, Δy, Δz, (Δrot,) gripper]: z is entry 2 and the gripper the last for every robot
+      s = env.step(s, jnp.zeros((env.action_size,), jnp.float32).at[2].set(-speed).at[-1].set(grip))
       return s, (s.info["cost"], s.metrics["success"])
 
     s, (cost, success) = jax.lax.scan(body, s, jnp.arange(LENGTH))
@@ -61,11 +63,19 @@ def rollout_fn(env, speed: float, open_at):
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
   p.add_argument("--episodes", type=int, default=8)
-  p.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "place_plate_touchdown"))
+  p.add_argument("--out", default=None, help="results path without extension (default "
+                 "benchmarks/results/place_plate_touchdown; another --robot: place_plate_touchdown_<robot>)")
+  p.add_argument("--robot", default="gripper",
+                 help=f"one of {', '.join(tasks.robots.names())} (default: gripper, the robot of the committed results)")
   a = p.parse_args(argv)
   if a.episodes < 1:
     p.error(f"--episodes: must be >= 1, got {a.episodes}")
-  env = tasks.make("place_plate", **tasks.RL_SETTINGS["place_plate"])
+  if a.robot not in tasks.robots_for("place_plate"):
+    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots_for('place_plate'))}")
+  robot = "" if a.robot == "gripper" else f"_{a.robot}"  # gripper: the committed results' name and fields
+  a.out = a.out or os.path.join(ROOT, "benchmarks", "results", "place_plate_touchdown" + robot)
+  # the gripper is passed explicitly (tasks.robots.DEFAULT may change)
+  env = tasks.make("place_plate", robot=a.robot, **tasks.RL_SETTINGS["place_plate"])
   keys = jax.random.split(jax.random.PRNGKey(0), a.episodes)
   rows = []
   for name, (speed, open_at) in POLICIES.items():
@@ -79,7 +89,8 @@ def main(argv=None) -> int:
                  "final_health_min": float(health.min()), "wall_s": round(time.perf_counter() - t0, 1)})
     print(name, rows[-1]["episode_cost"], flush=True)
   command = "python benchmarks/" + " ".join(shlex.quote(x) for x in [os.path.basename(__file__)] + sys.argv[1:])
-  write_json(a.out + ".json", {"command": command, "episodes": a.episodes, "rows": rows})
+  write_json(a.out + ".json", {"command": command, "episodes": a.episodes, **({"robot": a.robot} if robot else {}),
+                              "rows": rows})
   lines = ["# Place Plate (RL setting): how gentle must a placement be?", "",
            f"Command: `{command}` ({a.episodes} randomised starts per policy, key 0; open-loop policies,"
            " benchmarks/place_plate_touchdown.py docstring).", "",

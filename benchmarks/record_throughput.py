@@ -18,7 +18,8 @@ Two measurements per task, both with an operator of :mod:`tasks.operators`
   one chunk and records the next; needs ``--steady-episodes`` ≥ 2 ×
   ``--chunk``). Target on one H100: ≥ 100 k transitions/s recorded and written.
 
-Results: ``benchmarks/results/record_throughput_<device>.{json,md}``.
+Results: ``benchmarks/results/record_throughput_<device>.{json,md}`` (``--robot`` other than the gripper:
+``record_throughput_<robot>_<device>``, the robot in the JSON).
 
 CPU (``MJX_DAMAGE_CACHE_DIR=off``: compile as a first-time user does)::
 
@@ -117,11 +118,18 @@ def main(argv=None) -> int:
   ap.add_argument("--chunk", type=int, default=256, help="episodes per compiled call (steady state)")
   ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   ap.add_argument("--tag", default="")
+  ap.add_argument("--robot", default="gripper",
+                  help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
+                       "the robot of the committed results)")
   args = ap.parse_args(argv)
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
   names = [t for t in args.tasks.split(",") if t]
   for t in names:
     if t not in tasks.names():
       ap.error(f"--tasks: unknown task {t!r}")
+    if args.robot not in tasks.robots_for(t):
+      ap.error(f"--robot: task {t!r} supports {', '.join(tasks.robots_for(t))} only, got {args.robot!r}")
   if args.operator not in operators.CONDITIONS:
     ap.error(f"--operator: one of {', '.join(operators.CONDITIONS)}, got {args.operator!r}")
   for k in ("episodes", "steady_episodes", "chunk"):
@@ -133,7 +141,7 @@ def main(argv=None) -> int:
   rows = []
   with tempfile.TemporaryDirectory(prefix="record_throughput_") as tmp:
     for task in names:
-      env = tasks.make(task)
+      env = tasks.make(task, robot=args.robot)  # the gripper explicitly: tasks.robots.DEFAULT may change
       op = operators.make(env, args.operator)
       scratch = timed_record(env, op, task, args.episodes, args.episodes, 0, os.path.join(tmp, f"{task}_a.hdf5"))
       steady = timed_record(env, op, task, args.steady_episodes, args.chunk, 1, os.path.join(tmp, f"{task}_b.hdf5"))
@@ -155,8 +163,11 @@ def main(argv=None) -> int:
   result = {"command": cmd.strip(), "device": desc, "operator": args.operator, "rows": rows,
             "compilation_cache": cache,
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+  robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
+  if robot:
+    result["robot"] = args.robot
   os.makedirs(args.results_dir, exist_ok=True)
-  base = os.path.join(args.results_dir, f"record_throughput_{slug}" + (f"_{args.tag}" if args.tag else ""))
+  base = os.path.join(args.results_dir, f"record_throughput_{robot}{slug}" + (f"_{args.tag}" if args.tag else ""))
   write_json(base + ".json", result)
   lines = [f"# Recording throughput ({desc})", "", f"Command: `{result['command']}` ({result['date']}).", "",
            f"Operator `{args.operator}` through `train.record.record` (one compiled `jit(vmap(episode))` per "

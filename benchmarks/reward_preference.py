@@ -25,7 +25,9 @@ when every move it tries costs damage; its row against ``safe`` shows whether
 keeping still or the safe strategy earns more, with and without the damage
 penalty.
 
-Writes ``benchmarks/results/reward_preference[_TAG].{json,md}`` with the command.
+Writes ``benchmarks/results/reward_preference[_TAG].{json,md}`` with the command. ``--robot`` (default the
+gripper, the committed results' robot) is every task's robot; another robot writes
+``reward_preference_ROBOT[_TAG]`` with the robot in the JSON. ``--task-settings`` takes no ``robot``.
 
 Usage::
 
@@ -123,8 +125,9 @@ def _stat(x):
   return {"mean": float(x.mean()), "min": float(x.min()), "max": float(x.max())}
 
 
-def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dict, damage_weight: float) -> dict:
-  env = tasks.make(name, **overrides)
+def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dict, damage_weight: float,
+             robot: str = "gripper") -> dict:
+  env = tasks.make(name, robot=robot, **overrides)
   task = env.unwrapped
   length = task.episode_length
   policies = [still_policy(env) if s == STILL else task.policy(s) for s in styles]
@@ -175,7 +178,8 @@ def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dic
     cmp.append(c)
   return {"task": name, "overrides": overrides, "damage_weight": damage_weight, "styles": list(styles), "compile_s": round(compile_s, 1),
           "run_s": round(run_s, 1), "rows": rows, "comparisons": cmp,
-          "config": {k: v for k, v in tasks.default_config(name).items() if k != "params_fn"} | overrides}
+          "config": {k: v for k, v in tasks.default_config(name).items() if k != "params_fn"} | overrides
+          | {"robot": robot}}
 
 
 def _f(s, key="mean", fmt="{:.2f}"):
@@ -265,12 +269,21 @@ def parse_args(argv=None):
                       "'{\"start\": \"pregrasp\"}'; the results record them")
   p.add_argument("--tag", default="", help="results file suffix: reward_preference_TAG.{json,md}")
   p.add_argument("--out-dir", default=RESULTS)
+  p.add_argument("--robot", default="gripper",
+                 help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, the robot "
+                      "of the committed results); the results file gets _ROBOT unless it is the gripper")
   a = p.parse_args(argv)
+  if a.robot not in tasks.robots.names():
+    raise ValueError(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
   a.task_list = [n for n in a.tasks.split(",") if n]
   a.settings = {}
   for n in a.task_list:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
+    if a.robot not in tasks.robots_for(n):
+      raise ValueError(f"--robot: task {n!r} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
     a.settings[n] = tasks.rl_settings(n, a.task_settings)
+    if "robot" in a.settings[n]:  # one place for the robot: the file name and metadata follow --robot
+      raise ValueError(f"task_settings: no 'robot' key (got {a.settings[n]['robot']!r}); give the robot with --robot")
   if isinstance(a.episodes, bool) or a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   try:
@@ -297,10 +310,13 @@ def main(argv=None) -> int:
   result = {"command": command.strip(), "gammas": a.gamma_list, "damage_weight": a.damage_weight, "jax": jax.__version__,
             "backend": jax.default_backend(), "machine": platform.machine(), "cpu_count": os.cpu_count(),
             "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "git": _git(), "tasks": []}
-  stem = os.path.join(a.out_dir, "reward_preference" + (f"_{a.tag}" if a.tag else ""))
+  robot = "" if a.robot == "gripper" else f"_{a.robot}"  # gripper: the committed results' names and fields
+  if robot:
+    result["robot"] = a.robot
+  stem = os.path.join(a.out_dir, "reward_preference" + robot + (f"_{a.tag}" if a.tag else ""))
   for n in a.task_list:
     styles = ["safe", "unsafe"] + a.extra.get(n, [])
-    t = run_task(n, styles, a.episodes, a.gamma_list, a.seed, a.settings[n], a.damage_weight)
+    t = run_task(n, styles, a.episodes, a.gamma_list, a.seed, a.settings[n], a.damage_weight, a.robot)
     result["tasks"].append(t)
     for c in t["comparisons"]:
       print(f"{n} {c['policy']} - safe: " + ", ".join(

@@ -54,6 +54,7 @@ from tasks.rollout import rollout_fn, summarise  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(__file__), "results")
 STYLES = ("safe", "unsafe")
+ROBOT = "gripper"  # the committed results' robot; robots.DEFAULT may differ
 COMMAND = ""
 
 
@@ -63,7 +64,7 @@ def meets_target(style: str, row: dict) -> bool:
   return row["completion_pct"] >= 80.0 and row["safe_completion_pct"] <= 10.0
 
 
-def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = robots.DEFAULT,
+def run_task(name: str, episodes: int, seed: int, chunk: int, robot: str = ROBOT,
              settings: dict | None = None) -> list[dict]:
   """Both policies' episodes of one task; ``chunk`` episodes per policy per compiled call.
 
@@ -128,7 +129,7 @@ def write(rows: list[dict], command: str, stem: str = "scripted_policies") -> No
       "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
   }
   write_json(path, {"meta": meta, "rows": rows}, indent=1)
-  robot_names = sorted({r.get("robot", robots.DEFAULT) for r in rows})
+  robot_names = sorted({r.get("robot", ROBOT) for r in rows})  # rows without one: before --robot, the gripper
   lines = [
       "# Scripted safe vs unsafe policies (DAMAGE_MODEL.md §7 metrics)",
       "",
@@ -178,13 +179,14 @@ def main(argv=None) -> int:
   p.add_argument("--tasks", default=None, help="comma-separated (default: every task --robot runs)")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--chunk", type=int, default=0, help="episodes per policy per compiled call (default: all in one)")
-  p.add_argument("--robot", default=robots.DEFAULT, help=f"one of {', '.join(robots.names())}")
+  p.add_argument("--robot", default=ROBOT,
+                 help=f"one of {', '.join(robots.names())} (default {ROBOT}, the robot of the committed results)")
   p.add_argument("--rl-settings", action="store_true",
                  help="build each task in its RL setting (tasks.RL_SETTINGS) instead of its defaults")
   p.add_argument("--name", default=None, help="results file stem under benchmarks/results (see the module docstring)")
   a = p.parse_args(argv)
   robots.robot_class(a.robot)  # ValueError listing the valid robots, before anything compiles
-  stem = a.name or (("scripted_policies_rl" if a.rl_settings else "scripted_policies") if a.robot == robots.DEFAULT
+  stem = a.name or (("scripted_policies_rl" if a.rl_settings else "scripted_policies") if a.robot == ROBOT
                     else f"scripted_policies_{a.robot}_{jax.default_backend()}")
   if not stem or os.sep in stem or stem.startswith("."):
     raise ValueError(f"name: must be a plain file stem, got {stem!r}")

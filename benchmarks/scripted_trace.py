@@ -28,6 +28,8 @@ import numpy as np  # noqa: E402
 import tasks  # noqa: E402
 from tasks import robots  # noqa: E402
 
+ROBOT = "gripper"  # the committed results' robot; robots.DEFAULT may differ
+
 
 def trace(name: str, robot: str, episodes: int, seed: int):
   """Per-step arrays [2·episodes, T, …] (safe episodes first) and the env."""
@@ -67,7 +69,7 @@ def shown_episodes(completed, per_style: int, show: str) -> set:
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("task")
-  p.add_argument("--robot", default=robots.DEFAULT)
+  p.add_argument("--robot", default=ROBOT, help=f"one of {', '.join(robots.names())} (default {ROBOT})")
   p.add_argument("--episodes", type=int, default=6, help="per style")
   p.add_argument("--every", type=int, default=10, help="control steps between printed rows")
   p.add_argument("--seed", type=int, default=0)

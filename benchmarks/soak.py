@@ -36,7 +36,7 @@ file after every task, so a run stopped part-way keeps what finished and the mer
 the tasks not run.
 
 Writes ``benchmarks/results/soak_<platform>.{json,md}`` (``soak_<robot>_<platform>`` for a robot
-other than the default; ``--out``: another
+other than the gripper; ``--out``: another
 JSON path, the .md beside it); exits 1 when any counter above is non-zero.
 """
 
@@ -67,6 +67,7 @@ from tasks import robots
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EXTREMES = (1e3, -1e3, float("nan"), float("inf"), float("-inf"))
+ROBOT = "gripper"  # the committed results' robot; robots.DEFAULT may differ
 COUNTERS = ("non_finite", "health_out_of_range", "health_increase", "particle_violations", "sanitise_mismatch")
 
 
@@ -162,7 +163,7 @@ def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int |
 
 
 def soak_task(name: str, envs: int, steps: int, chunk: int, extreme_frac: float, seed: int = 0,
-              robot: str = robots.DEFAULT) -> dict:
+              robot: str = ROBOT) -> dict:
   """Soak one task with ``robot``: ``steps`` env steps per env (rounded up to whole chunks). Counts as plain ints."""
   env = tasks.make(name, robot=robot)
   reset, run = build(env, envs, chunk, extreme_frac)
@@ -191,7 +192,7 @@ def failures(row: dict) -> int:
 def report_md(res: dict) -> str:
   lines = [f"# Soak: random and extreme actions through every task ({res['device']})", "",
            f"Command: `{res['command']}`  ", f"Date: {res['date']}; total {res['total_s']} s", "",
-           f"Robot: {res.get('robot', robots.DEFAULT)}. {res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions uniform in [−1, 1] with "
+           f"Robot: {res.get('robot', ROBOT)}. {res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions uniform in [−1, 1] with "
            f"{100 * res['extreme_frac']:g} % of entries replaced by one of ±1e3, NaN, ±inf. Every (env, step) is "
            "checked on device (benchmarks/soak.py docstring defines the counters).", "",
            "| task | steps | episodes | non-finite | health out of [0, 100] | health increases | particles | "
@@ -218,7 +219,8 @@ def main(argv=None) -> int:
   gpu = jax.default_backend() != "cpu"
   p.add_argument("--tasks", default=None,
                  help="comma-separated task names (default: every task the robot supports)")
-  p.add_argument("--robot", default=robots.DEFAULT, help=f"one of {', '.join(robots.names())}")
+  p.add_argument("--robot", default=ROBOT,
+                 help=f"one of {', '.join(robots.names())}; the default is the robot of the committed results")
   p.add_argument("--envs", type=int, default=512 if gpu else 8, help="environments per task")
   p.add_argument("--steps", type=int, default=None,
                  help="env steps per task, all envs together (default 1e6 on GPU, 3200 on CPU)")
@@ -285,8 +287,8 @@ def main(argv=None) -> int:
 
 
 def default_out(platform_name: str, robot: str) -> str:
-  """benchmarks/results/soak_<platform>.json, or soak_<robot>_<platform>.json for a robot but the default."""
-  stem = "soak_" + ("" if robot == robots.DEFAULT else robot + "_") + platform_name
+  """benchmarks/results/soak_<platform>.json, or soak_<robot>_<platform>.json for a robot but the gripper."""
+  stem = "soak_" + ("" if robot == ROBOT else robot + "_") + platform_name
   return os.path.join(HERE, "results", stem + ".json")
 
 
@@ -333,7 +335,7 @@ def run_workers(argv: list[str], names: list[str], workers: int, out: str, p) ->
 def merge(paths, out, p) -> int:
   """One results file from several (same device and settings), rows in task order; exit status as a soak."""
   res = merged(paths, p)
-  return write(res, out or default_out(res["device"].split(":")[0], res.get("robot", robots.DEFAULT)))
+  return write(res, out or default_out(res["device"].split(":")[0], res.get("robot", ROBOT)))
 
 
 def merged(paths, p) -> dict:

@@ -64,6 +64,7 @@ sys.path.insert(0, os.path.dirname(HERE))  # the repo's packages, wherever this 
 VARIANTS = ("task", "zeros_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage", "raw",
             "raw_moving", "raw_replay")
 POLICIES = ("mlp", "zeros", "scripted")
+ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may differ
 
 
 def make_policy(env, kind: str):
@@ -143,7 +144,7 @@ def applicable(task, variant: str) -> bool:
 
 
 def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy_kind: str, clock=time.perf_counter,
-            robot: str | None = None, compile_only: bool = False) -> dict | None:
+            robot: str = ROBOT, compile_only: bool = False) -> dict | None:
   """One (task, variant) row; ``compile_only``: compile (filling the persistent cache) and return None."""
   import jax
   import jax.numpy as jnp
@@ -151,7 +152,6 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   import tasks
   from mjx_damage import physics
 
-  robot = robot or tasks.robots.DEFAULT
   env = tasks.make(name, robot=robot)
   task = env.unwrapped
   override = _physics_override(task, variant)
@@ -328,7 +328,8 @@ def main(argv=None) -> int:
   p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                  help="cpu: process CPU seconds (all threads) — steadier than wall time on a shared, loaded CPU; "
                       "use wall on a GPU")
-  p.add_argument("--robot", default=None, help="robot of every task (default: each task's default, the gripper)")
+  p.add_argument("--robot", default=ROBOT,
+                 help=f"robot of every task (default {ROBOT}, the robot of the committed results)")
   p.add_argument("--precompile-workers", type=int, default=0,
                  help="compile every (task, variant) first in this many parallel processes, which fill JAX's "
                       "persistent cache; then time them one after another in this process (its compiles hit the "
@@ -351,12 +352,11 @@ def main(argv=None) -> int:
   for n in names:
     if n not in tasks.names():
       p.error(f"--tasks: unknown {n!r}; valid: {', '.join(tasks.names())}")
-  if a.robot is not None:
-    if a.robot not in tasks.robots.names():
-      p.error(f"--robot: unknown {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
-    for n in names:
-      if a.robot not in tasks.robots_for(n):
-        p.error(f"--tasks: {n!r} supports {', '.join(tasks.robots_for(n))} only, not --robot {a.robot}")
+  if a.robot not in tasks.robots.names():
+    p.error(f"--robot: unknown {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  for n in names:
+    if a.robot not in tasks.robots_for(n):
+      p.error(f"--tasks: {n!r} supports {', '.join(tasks.robots_for(n))} only, not --robot {a.robot}")
   # No JAX_COMPILATION_CACHE_DIR of its own: set here, after `import tasks` had pointed this process's
   # cache at the package's directory, it reached only the precompile children, which then filled
   # another directory than the one this process reads (every program compiled twice).
@@ -368,7 +368,7 @@ def main(argv=None) -> int:
 
   jax.monitoring.register_event_listener(_count_hit)
 
-  probes = {n: tasks.make(n, robot=a.robot or tasks.robots.DEFAULT).unwrapped for n in names}
+  probes = {n: tasks.make(n, robot=a.robot).unwrapped for n in names}
   pairs = [(n, v) for n in names for v in variants if applicable(probes[n], v)]
   clock = time.perf_counter if a.clock == "wall" else time.process_time
   if a.compile_only:

@@ -4,7 +4,9 @@ Runs ``mjx-damage sweep`` (:mod:`train.sweep`) over every registered task with
 the scripted safe/unsafe policies, several seeds and fragility levels, and
 writes ``benchmarks/results/sweep_<device>.json`` and ``.md``. The CPU setting
 is small (few episodes) to fit the 2-core machine; the GPU one is the
-paper-style table. Extra arguments pass through (later ones win).
+paper-style table. Extra arguments pass through (later ones win). ``--robot``
+(default the gripper, the committed results' robot) runs every task with that
+robot and writes ``sweep_<robot>_<device>.*``.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
+ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may differ
 SETTINGS = {
     "cpu": ["--seeds", "0,1", "--fragility", "0.5,1,2,4", "--episodes", "8"],
     "gpu": ["--seeds", "0,1,2", "--fragility", "0.25,0.5,1,2,4,8", "--episodes", "256"],
@@ -25,17 +28,26 @@ SETTINGS = {
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
   ap.add_argument("--device", choices=sorted(SETTINGS), required=True)
-  ap.add_argument("--tasks", default=None, help="comma-separated tasks (default: every registered task)")
+  ap.add_argument("--tasks", default=None, help="comma-separated tasks (default: every task --robot runs)")
+  ap.add_argument("--robot", default=ROBOT,
+                  help=f"robot of every task, one of tasks.robots.names() (default {ROBOT}, the robot of the "
+                       "committed results)")
   args, extra = ap.parse_known_args(argv)
   if args.device == "cpu":
     os.environ.setdefault("JAX_PLATFORMS", "cpu")
   import tasks
 
-  task_list = args.tasks or ",".join(tasks.names())
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  task_list = args.tasks or ",".join(tasks.select(None, args.robot))
   from apps import sweep_cli
 
-  out = os.path.join(HERE, "results", f"sweep_{args.device}.json")
-  return sweep_cli.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"]
+  name = "sweep_" + ("" if args.robot == ROBOT else args.robot + "_") + args.device
+  out = os.path.join(HERE, "results", name + ".json")
+  # mjx-damage sweep's own default is tasks.robots.DEFAULT: name the robot only where it differs, so the
+  # recorded command stays as it was for the gripper while that is the default
+  robot = [] if args.robot == tasks.robots.DEFAULT else ["--robot", args.robot]
+  return sweep_cli.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"] + robot
                         + SETTINGS[args.device] + ["--out", out, "--overwrite"] + extra)
 
 

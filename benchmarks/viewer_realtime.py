@@ -1,6 +1,6 @@
 """Does the interactive viewer keep up with real time? Its control-step rate per task, feedback on.
 
-For every registered task (gripper robot), ``mjx-damage view``'s loop
+For every registered task (``--robot``, default the gripper), ``mjx-damage view``'s loop
 (:func:`apps.viewer.app.run`) runs the task's scripted unsafe policy (so
 health falls, the tint changes and the panel is redrawn) with damage feedback
 on, unpaced (``realtime=False``), on a private Xvfb screen (software OpenGL;
@@ -23,8 +23,10 @@ step — what the simulation needs whatever else runs.
 
     python benchmarks/viewer_realtime.py                   # all tasks, 150 steps each
     python benchmarks/viewer_realtime.py --tasks pour_water --steps 40   # smoke
+    python benchmarks/viewer_realtime.py --robot panda     # every task the Panda runs
 
-Writes ``benchmarks/results/viewer_realtime_<device>.{json,md}`` (``--out-dir``).
+Writes ``benchmarks/results/viewer_realtime_<device>.{json,md}`` (``--out-dir``; ``--robot`` other than the
+gripper: ``viewer_realtime_<robot>_<device>``, the robot in the metadata).
 """
 
 from __future__ import annotations
@@ -65,8 +67,8 @@ def native_only(env, steps: int, warmup: int) -> dict:
           "native_realtime_factor_cpu": round(env.dt / cpu, 2)}
 
 
-def measure(name: str, steps: int, warmup: int, feedback: bool) -> dict:
-  env = tasks.make(name)
+def measure(name: str, steps: int, warmup: int, feedback: bool, robot: str = "gripper") -> dict:
+  env = tasks.make(name, robot=robot)
   native = native_only(env, steps, warmup) if feedback else {}
   load0 = os.getloadavg()[0]
   t0 = time.perf_counter()
@@ -111,16 +113,24 @@ def markdown(rows: list, meta: dict) -> str:
 
 def main(argv=None) -> int:
   ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-  ap.add_argument("--tasks", default=",".join(tasks.names()), help="comma-separated task names")
+  ap.add_argument("--tasks", default=None, help="comma-separated task names (default: every task --robot runs)")
   ap.add_argument("--steps", type=int, default=150, help="timed control steps per task")
   ap.add_argument("--warmup", type=int, default=10, help="untimed first steps (compilation)")
   ap.add_argument("--no-feedback-too", action="store_true", help="also measure with feedback off")
   ap.add_argument("--out-dir", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results"))
+  ap.add_argument("--robot", default="gripper",
+                  help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
+                       "the robot of the committed results)")
   args = ap.parse_args(argv)
-  names = [n for n in args.tasks.split(",") if n]
+  if args.robot not in tasks.robots.names():
+    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  names = ([n for n in args.tasks.split(",") if n] if args.tasks is not None
+           else [n for n in tasks.names() if args.robot in tasks.robots_for(n)])
   for n in names:
     if n not in tasks.names():
       ap.error(f"tasks: unknown task {n!r}; valid: {', '.join(tasks.names())}")
+    if args.robot not in tasks.robots_for(n):
+      ap.error(f"--robot: task {n!r} supports {', '.join(tasks.robots_for(n))} only, got {args.robot!r}")
   if X.xvfb_path() is None:
     print("viewer_realtime: needs Xvfb (apt-get install xvfb)", file=sys.stderr)
     return 1
@@ -129,13 +139,16 @@ def main(argv=None) -> int:
   with X.virtual_display() as _:
     for n in names:
       for fb in (True, False) if args.no_feedback_too else (True,):
-        r = measure(n, args.steps, args.warmup, fb)
+        r = measure(n, args.steps, args.warmup, fb, args.robot)
         print(r, flush=True)
         rows.append(r)
   meta = {"device": device, "cpu_count": os.cpu_count(), "platform": platform.platform(),
           "command": "python benchmarks/viewer_realtime.py " + shlex.join(argv if argv is not None else sys.argv[1:]),
           "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
-  base = os.path.join(args.out_dir, f"viewer_realtime_{slug}")
+  robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
+  if robot:
+    meta["robot"] = args.robot
+  base = os.path.join(args.out_dir, f"viewer_realtime_{robot}{slug}")
   io.write_json(base + ".json", {"meta": meta, "rows": rows})
   io.write_text(base + ".md", markdown(rows, meta))
   print(f"wrote {base}.json, {base}.md")

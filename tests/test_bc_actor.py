@@ -163,7 +163,8 @@ def test_bc_cli_writes_a_checkpoint_and_refuses_to_overwrite(demos, tmp_path):
     (["--task", "no_such_task"], "--task"), (["--policy-hidden", "512,0"], "--policy-hidden"),
     (["--demos-from", "humans"], "--demos-from"), (["--record", "0"], "--record"),
     (["--ft-learning-rate", "0"], "--ft-learning-rate"), (["--ft-entropy-cost", "-1"], "--ft-entropy-cost"),
-    (["--ft-target-kl", "nan"], "--ft-target-kl"), (["--eval-every", "0"], "--eval-every")])
+    (["--ft-target-kl", "nan"], "--ft-target-kl"), (["--eval-every", "0"], "--eval-every"),
+    (["--robot", "no_such_robot"], "--robot")])
 def test_bc_finetune_bad_flags_exit_2_naming_the_flag(flags, named, capsys):
   """benchmarks/bc_finetune.py refuses bad sizes and budgets before recording or compiling anything."""
   with pytest.raises(SystemExit) as e:

@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import pytest
+from conftest import load_benchmark
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCRIPT = os.path.join(ROOT, "benchmarks", "cpu_stall.py")
@@ -51,6 +52,13 @@ def test_import_after_backend_start_warns():
   env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "MJX_DAMAGE_XLA_CPU_FIX")}
   out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True).stdout
   assert out.startswith("warned") and "XLA_FLAGS" in out
+
+
+def test_unknown_robot_refused_naming_the_flag(capsys):
+  """--robot is checked before any child process starts."""
+  with pytest.raises(SystemExit) as e:
+    load_benchmark("cpu_stall").main(["--robot", "no_such_robot", "--out", "-"])
+  assert e.value.code == 2 and "--robot" in capsys.readouterr().err
 
 
 def test_one_call_of_512_envs_finishes():

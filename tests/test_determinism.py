@@ -148,3 +148,10 @@ def test_gpu_criteria_allow_only_mjx_derived_leaves_to_differ():
   assert [checks[k]["ok"] for k in ("rerun", "chunked", "recompiled", "half_batch")] == [True, False, True, False]
   _det.judge(checks, _det.TOL, strict=True)
   assert not any(c["ok"] for c in checks.values())
+
+
+def test_unknown_robot_refused_naming_the_flag(capsys):
+  """--robot is checked before anything compiles."""
+  with pytest.raises(SystemExit) as e:
+    _det.main(["--robot", "no_such_robot"])
+  assert e.value.code == 2 and "--robot" in capsys.readouterr().err

@@ -16,11 +16,23 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
                                         (["--fragility", "1,x"], "--fragility"),
                                         (["--episodes-per-device", "6"], "--episodes-per-device"),
                                         (["--sequence", "shardy:one,gspmd:fast"], "--sequence"),
-                                        (["--sequence", "one"], "--sequence")])
+                                        (["--sequence", "one"], "--sequence"),
+                                        (["--robot", "no_such_robot"], "--robot"),
+                                        (["--robot", "panda_wrist", "--task", "navigate_and_pick"], "--robot"),
+                                        (["--task", "train.experiments.pusher:PusherEnv", "--robot", "panda"], "--robot")])
 def test_bad_flags_are_refused_naming_them(argv, named, capsys):
   with pytest.raises(SystemExit) as e:
     load_benchmark("eval_dispatch").parse(argv)
   assert e.value.code == 2 and named in capsys.readouterr().err
+
+
+def test_the_gripper_by_default_whatever_the_registry_default(monkeypatch):
+  import tasks
+
+  monkeypatch.setattr(tasks.robots, "DEFAULT", "panda")  # committed results were made with the gripper
+  ed = load_benchmark("eval_dispatch")
+  assert ed.parse([]).task_kwargs == {"robot": "gripper"}
+  assert ed.parse(["--task", "train.experiments.pusher:PusherEnv"]).task_kwargs is None  # an env class: no robot
 
 
 def test_every_mode_runs_on_two_cpu_devices():

@@ -56,6 +56,12 @@ def test_bad_temperatures_are_refused_naming_the_flag(value, capsys):
   assert e.value.code == 2 and "--temperature" in capsys.readouterr().err
 
 
+def test_unknown_robot_is_refused_naming_the_flag(capsys):
+  with pytest.raises(SystemExit) as e:
+    il.parse(["--robot", "no_such_robot"])
+  assert e.value.code == 2 and "--robot" in capsys.readouterr().err
+
+
 def test_temperatures_default_to_the_grid_and_rows_show_the_chosen_one(tmp_path):
   a = il.parse(["--quick"])
   assert a.temperature == list(il.TEMPERATURES) and a.val_episodes == il.QUICK["val_episodes"]

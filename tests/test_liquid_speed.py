@@ -15,6 +15,7 @@ ls = load_benchmark("liquid_speed")
     (["--envs", "0"], "--envs"),
     (["--substeps", "-1"], "--substeps"),
     (["--task", "nope"], "--task"),
+    (["--robot", "no_such_robot"], "--robot"),
 ])
 def test_cli_names_the_bad_field(argv, field, capsys):
   with pytest.raises(SystemExit) as e:

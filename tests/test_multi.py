@@ -311,6 +311,30 @@ def test_multi_gpu_benchmark_refuses_bad_parts(parts, capsys):
   assert mg.parse(["--parts", "train"]).parts == ["train"]
 
 
+@pytest.mark.parametrize("argv", [["--robot", "no_such_robot"], ["--task", TASK, "--robot", "panda"],
+                                  ["--task", "navigate_and_pick", "--robot", "panda_wrist"]])
+def test_multi_gpu_benchmark_refuses_a_bad_robot(argv, capsys):
+  with pytest.raises(SystemExit) as e:
+    load_benchmark("multi_gpu").parse(argv)
+  assert e.value.code == 2 and "--robot" in capsys.readouterr().err
+
+
+def test_multi_gpu_benchmark_keeps_the_gripper_and_its_file_names(tmp_path, monkeypatch):
+  """The committed results are the gripper's: its default and file names do not follow tasks.robots.DEFAULT;
+  another robot's files carry its name."""
+  import tasks
+
+  monkeypatch.setattr(tasks.robots, "DEFAULT", "panda")
+  mg = load_benchmark("multi_gpu")
+  seen = []
+  monkeypatch.setattr(mg, "eval_runs", lambda args, d, save: seen.append(args.task_kwargs) or {
+      "episodes": 4, "env_steps_per_s": {"runs": [1.0], "mean": 1.0, "min": 1.0, "max": 1.0}})
+  base = ["--devices", "1", "--parts", "eval", "--results-dir", str(tmp_path)]
+  assert mg.main(base) == 0 and mg.main(base + ["--robot", "panda"]) == 0
+  assert seen == [{"robot": "gripper"}, {"robot": "panda"}]
+  assert {"multi_gpu_cpu.json", "multi_gpu_panda_cpu.json"} <= set(os.listdir(tmp_path))
+
+
 def test_multi_gpu_append_merges_a_train_call_and_an_eval_call(tmp_path, monkeypatch):
   """A training-only call and an evaluation-only call (e.g. two device calls under a time limit) end in one
   row per device count, each part with its own command; a call's own parts replace the earlier ones."""

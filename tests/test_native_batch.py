@@ -176,7 +176,7 @@ def test_box_scene_comparison_with_the_reference_pipeline():
 
 @pytest.mark.parametrize("argv, field", [(["--boxes", "1,x"], "--boxes"), (["--boxes", "0"], "--boxes"),
                                          (["--box-envs", "0"], "--box-envs"), (["--ref-max-s", "nan"], "--ref-max-s"),
-                                         (["--tasks", "nope"], "--tasks")])
+                                         (["--tasks", "nope"], "--tasks"), (["--robot", "no_such_robot"], "--robot")])
 def test_native_benchmark_refuses_bad_box_flags(argv, field, capsys):
   with pytest.raises(SystemExit) as e:
     load_benchmark("native_backend").main(argv)

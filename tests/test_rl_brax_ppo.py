@@ -65,6 +65,14 @@ def test_reward_preference_takes_the_same_task_settings():
     P.parse_args(["--tasks", "pick_egg", '--task-settings={"start": "midair"}'])
 
 
+def test_reward_preference_refuses_an_unknown_robot_and_a_robot_in_task_settings():
+  P = load_benchmark("reward_preference")
+  with pytest.raises(ValueError, match="--robot"):
+    P.parse_args(["--tasks", "pick_egg", "--robot", "no_such_robot"])
+  with pytest.raises(ValueError, match="task_settings.*--robot"):
+    P.parse_args(["--tasks", "pick_egg", '--task-settings={"robot": "panda"}'])
+
+
 def test_reward_preference_still_style_is_the_zero_action():
   P = load_benchmark("reward_preference")
   a = P.parse_args(["--tasks", "shelve_item", "--style", "shelve_item:still"])

@@ -33,3 +33,18 @@ def test_default_tasks_are_those_the_robot_runs(monkeypatch):
   monkeypatch.setattr(scripted_policies, "write", lambda *a, **k: None)
   assert scripted_policies.main(["--robot", "panda_wrist", "--name", "unused_test_stem"]) == 0
   assert ran == tasks.select(None, "panda_wrist") and "navigate_and_pick" not in ran
+
+
+def test_the_gripper_and_its_file_names_whatever_the_registry_default(monkeypatch):
+  """The committed results are the gripper's: default robot and results stem do not follow
+  tasks.robots.DEFAULT; another robot's stem carries its name."""
+  monkeypatch.setattr(tasks.robots, "DEFAULT", "panda")
+  ran = []
+  monkeypatch.setattr(scripted_policies, "run_task", lambda name, e, s, c, robot, *a: ran.append(robot) or [])
+  monkeypatch.setattr(scripted_policies, "write", lambda rows, command, stem: ran.append(stem))
+  assert scripted_policies.main(["--tasks", "place_plate"]) == 0
+  assert scripted_policies.main(["--tasks", "place_plate", "--rl-settings"]) == 0
+  assert scripted_policies.main(["--tasks", "place_plate", "--robot", "panda"]) == 0
+  backend = scripted_policies.jax.default_backend()
+  assert ran == ["gripper", "scripted_policies", "gripper", "scripted_policies_rl",
+                 "panda", f"scripted_policies_panda_{backend}"]

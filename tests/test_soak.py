@@ -98,3 +98,21 @@ def test_soak_cli_names_the_bad_field(argv, field, capsys):
   with pytest.raises(SystemExit) as e:
     soak.main(argv)
   assert e.value.code == 2 and field in capsys.readouterr().err
+
+
+def test_soak_keeps_the_gripper_and_its_file_names(monkeypatch):
+  """The committed results are the gripper's: the default robot and file names do not follow
+  tasks.robots.DEFAULT; another robot's file carries its name."""
+  monkeypatch.setattr(soak.robots, "DEFAULT", "panda")
+
+  class Stop(Exception):
+    pass
+
+  def stop(name, *a):
+    raise Stop(a[-1])
+
+  monkeypatch.setattr(soak, "soak_task", stop)
+  with pytest.raises(Stop, match="^gripper$"):
+    soak.main(["--tasks", "place_plate", "--out", "unused.json"])
+  assert soak.default_out("cpu", "gripper").endswith("soak_cpu.json")
+  assert soak.default_out("cpu", "panda").endswith("soak_panda_cpu.json")

@@ -24,6 +24,22 @@ def test_cli_names_the_bad_field(argv, field, capsys):
   assert e.value.code == 2 and field in capsys.readouterr().err
 
 
+def test_the_gripper_by_default_whatever_the_registry_default(monkeypatch):
+  import tasks
+
+  monkeypatch.setattr(tasks.robots, "DEFAULT", "panda")  # committed results were made with the gripper
+
+  class Stop(Exception):
+    pass
+
+  def stop(name, robot):
+    raise Stop(robot)
+
+  monkeypatch.setattr(tasks, "make", stop)
+  with pytest.raises(Stop, match="^gripper$"):
+    so.main(["--tasks", "place_plate"])
+
+
 def test_children_get_the_command_without_the_per_child_flags():
   argv = ["--envs", "32768", "--precompile-workers=6", "--tasks", "a,b", "--robot", "panda", "--variants", "task,raw"]
   assert argv_without(argv, ("--precompile-workers", "--tasks", "--variants")) == ["--envs", "32768", "--robot", "panda"]
