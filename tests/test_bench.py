@@ -225,8 +225,9 @@ def test_bench_cli_rejects_bad_backend(argv, message, tmp_path, capsys, monkeypa
 
 
 def test_task_throughput_on_native_backend():
-  row = bench.measure_task("place_plate", 2, 0.05, 2, backend="native")
+  row = bench.measure_task("place_plate", 2, 0.05, 2, backend="native", overrides={"robot": "gripper"})
   assert row["backend"] == "native" and row["task"] == "place_plate" and row["envs"] == 2
+  assert row["robot"] == "gripper"
   assert row["steps"] >= 2 and row["env_steps_per_s"] > 0 and row["nthread"] >= 1
   assert row["physics_steps_per_s"] == pytest.approx(row["env_steps_per_s"] * row["n_substeps"])
 
@@ -247,5 +248,5 @@ def test_bench_cli_records_native_task_backend(backend, tmp_path, monkeypatch):
   res = json.loads(out.read_text())
   assert res["task_backend"] == "native"
   assert res["task"]["backend"] == "native" and res["task"]["env_steps_per_s"] > 0
-  assert "(native backend, 2 envs" in (tmp_path / "b.md").read_text()
+  assert "(native backend, robot gripper, 2 envs" in (tmp_path / "b.md").read_text()
   assert f"--backend {backend}" in res["command"]

@@ -149,6 +149,7 @@ def build_parser() -> Parser:
   p.add_argument("--task", required=True, help="registered task name, or package.module:EnvClass")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode=paper")
+  p.add_argument("--robot", default=None, help="robot of a registered --task, e.g. gripper (default: the task's, panda)")
   p.add_argument("--out", dest="out_dir", default=None,
                  help="run directory (config, metrics, checkpoint, curves) (default: runs/train-<task>-<time>/, a new folder)")
   p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.npz")
@@ -248,8 +249,17 @@ def main(argv=None) -> int:
   try:  # everything the user typed is checked here, before JAX starts
     setup = distributed.check(**dist)
     import tasks  # the registry (loads JAX, compiles nothing)
-    args["task_kwargs"] = tasks.parse_task_args(args.pop("task_arg")) or None
+    task_kwargs, robot = tasks.parse_task_args(args.pop("task_arg")), args.pop("robot")
     check_task(task)
+    if robot is not None:
+      if ":" in task:
+        raise ValueError(f"--robot: only for a registered --task, not the env class {task!r}")
+      if robot not in tasks.robots_for(task):
+        raise ValueError(f"--robot: task {task!r} runs {', '.join(tasks.robots_for(task))}, got {robot!r}")
+      if task_kwargs.get("robot", robot) != robot:
+        raise ValueError(f"--robot: {robot!r} disagrees with --task-arg robot={task_kwargs['robot']!r}")
+      task_kwargs["robot"] = robot
+    args["task_kwargs"] = task_kwargs or None
     if args["init_from"] is not None and not os.path.exists(args["init_from"]):
       raise ValueError(f"--init-from: no checkpoint at {args['init_from']}")
     if args["time_limit"] is not None and not (math.isfinite(args["time_limit"]) and args["time_limit"] > 0):

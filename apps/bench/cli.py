@@ -188,7 +188,8 @@ def run_benchmark(args) -> dict:
     if args.task in tasks.names():
       print(f"  task {args.task} x {args.task_envs} envs, backend {args.backend} ...", flush=True)
       try:
-        result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps, args.backend)
+        result["task"] = measure_task(args.task, args.task_envs, args.target_s, args.max_steps, args.backend,
+                                      args.task_kwargs)
       except Exception as e:  # keep the rest of the run
         result["skipped"].append({"task": args.task, "backend": args.backend,
                                   "why": f"{type(e).__name__}: {str(e)[:300]}"})
@@ -225,6 +226,7 @@ def build_parser() -> Parser:
   ap.add_argument("--ref-steps", type=int, default=25, help="env steps per reference environment")
   ap.add_argument("--ref-max-s", type=float, default=20.0, help="stop the reference after about this long")
   ap.add_argument("--task", default="place_plate", help="registry task to time ('' to skip)")
+  ap.add_argument("--robot", default=None, help="robot of --task, e.g. gripper (default: the task's)")
   ap.add_argument("--task-envs", type=int, default=None,
                   help="batch for the task (CPU or --backend native 256, GPU 32768)")
   R.add_backend_argument(ap, "here it picks the backend of the --task throughput only: the K-box curves are "
@@ -248,8 +250,18 @@ def main(argv=None) -> int:
   args.entity_envs = args.entity_envs or (8192 if gpu else 1024)
   args.ratio_envs = args.ratio_envs or (8192 if gpu else 1024)
   try:
+    args.task_kwargs = {} if args.robot is None else {"robot": args.robot}
+    if args.robot is not None:
+      if args.robot not in tasks.robots.names():
+        raise ValueError(f"--robot: unknown robot {args.robot!r} (valid: {', '.join(tasks.robots.names())})")
+      if args.task not in tasks.names():
+        raise ValueError(f"--robot: only with a registry --task, got --task {args.task!r}")
+      if args.robot not in tasks.robots_for(args.task):
+        raise ValueError(f"--robot: task {args.task!r} runs {', '.join(tasks.robots_for(args.task))} only, "
+                         f"not {args.robot!r}")
     if R.check_backend(args.backend) == "auto":  # the task's pick; nothing to pick without a task
-      args.backend = R.pick_backend("auto", R.make_task(args.task)) if args.task in tasks.names() else "mjx"
+      args.backend = (R.pick_backend("auto", R.make_task(args.task, **args.task_kwargs)) if args.task in tasks.names()
+                      else "mjx")
     native = args.backend == "native"  # native steps on CPU threads whatever the device: the CPU batch
     args.task_envs = args.task_envs or (32768 if gpu and not native else 256)
     envs = _parse_ints("--envs", args.envs)
@@ -272,7 +284,7 @@ def main(argv=None) -> int:
     if native and not args.task:
       raise ValueError("backend: native times the --task throughput only, and --task is '' (nothing to time)")
     if native:  # a scene the native backend cannot run fails here, before anything compiles
-      R.on_backend(R.make_task(args.task), args.backend, 1)
+      R.on_backend(R.make_task(args.task, **args.task_kwargs), args.backend, 1)
     if args.out is not None:
       base = os.path.splitext(args.out)[0]
       outputs.check_new([args.out, base + ".md", base + ".png"], "--out", args.overwrite)

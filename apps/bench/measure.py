@@ -136,19 +136,22 @@ def measure_pair(env, envs: int, target_s: float, max_steps: int, repeats: int =
   return rows[0], rows[1]
 
 
-def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend: str = "mjx") -> dict:
+def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend: str = "mjx",
+                 overrides: dict | None = None) -> dict:
   """Physics steps/s of a registry task's ``step`` (damage on, zero action) on ``backend``.
 
   ``mjx``: ``vmap(env.step)`` in a compiled ``fori_loop``. ``native``: the task's
   :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``envs`` stepped from Python
   (one native call and two jitted calls per step, as evaluation runs it); its
   jitted halves compile in the first step, so there ``compile_s`` is that first
-  step's time. The row records ``backend``. Raises ValueError for a scene the
-  native backend cannot run.
+  step's time. The row records ``backend`` and the robot. ``overrides``: ``tasks.make``
+  keywords (``robot``). Raises ValueError for a scene the native backend cannot run.
   """
-  env = R.on_backend(R.make_task(name), backend, envs)
+  task = R.make_task(name, **(overrides or {}))
+  robot = task.unwrapped.robot_name
+  env = R.on_backend(task, backend, envs)
   if backend == "native":
-    return _measure_native_task(name, env, envs, target_s, max_steps)
+    return dict(_measure_native_task(name, env, envs, target_s, max_steps), robot=robot)
   n_sub = getattr(env, "n_substeps", None) or getattr(env.unwrapped, "n_substeps", 1)
   state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), envs))
   act = jnp.zeros((envs, env.action_size))
@@ -167,7 +170,7 @@ def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend:
   t0 = time.perf_counter()
   state = jax.block_until_ready(compiled(state, jnp.int32(steps)))
   secs = time.perf_counter() - t0
-  return _task_row(name, "mjx", envs, n_sub, steps, secs, compile_s)
+  return dict(_task_row(name, "mjx", envs, n_sub, steps, secs, compile_s), robot=robot)
 
 
 def _measure_native_task(name: str, nenv, envs: int, target_s: float, max_steps: int) -> dict:

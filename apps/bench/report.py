@@ -117,7 +117,8 @@ def report_md(result: dict) -> str:
     lines.append("")
   if "task" in result:
     t = result["task"]
-    lines += [f"Task `{t['task']}` ({t.get('backend', 'mjx')} backend, {t['envs']} envs, {t['n_substeps']} substeps): "
+    robot = f", robot {t['robot']}" if "robot" in t else ""  # rows before --robot name none (the gripper)
+    lines += [f"Task `{t['task']}` ({t.get('backend', 'mjx')} backend{robot}, {t['envs']} envs, {t['n_substeps']} substeps): "
               f"{t['physics_steps_per_s']:,.0f} physics steps/s, {t['env_steps_per_s']:,.0f} env steps/s.", ""]
   lines += ["## Summary", "", "```json", json.dumps(result["summary"], indent=1), "```", ""]
   reading = []
