@@ -26,6 +26,7 @@ import numpy as np
 
 from mjx_damage import data as D
 from mjx_damage import outputs
+import tasks
 from train import bc_actor as BA
 from train import curate
 from train.cli import _ints
@@ -80,7 +81,7 @@ def main(argv=None) -> int:
   t0 = time.perf_counter()
   with heartbeat("bc"):
     fit = BA.fit_actor(ds, cfg, seeds=cfg.seeds, steps=args.steps, batch=args.batch, lr=args.lr)
-  path = BA.save(fit, out, task=task, task_kwargs=json.loads(ds.env_config),
+  path = BA.save(fit, out, task=task, task_kwargs=tasks.stored_kwargs(task, json.loads(ds.env_config)),
                  extra={"dataset": os.path.abspath(args.dataset), "min_health": args.min_health})
   loss = np.asarray(fit.losses)
   print(f"fitted in {time.perf_counter() - t0:.1f} s; negative log-likelihood per action dim, first -> last 100 "

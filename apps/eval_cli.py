@@ -85,7 +85,8 @@ def main(argv=None) -> int:
   if res["program"] == "loaded":
     print("traced program loaded from the cache (no tracing, no compiling)")
   result = {
-      "task": args.task, "task_kwargs": overrides, "policy": args.policy, "episodes": args.episodes,
+      "task": args.task, "task_kwargs": R.tasks.recorded_kwargs(args.task, overrides), "policy": args.policy,
+      "episodes": args.episodes,
       "seed": args.seed,
       "fragility": args.fragility, "episode_length": res["episode_length"], "backend": backend,
       "backend_requested": args.backend,

@@ -18,6 +18,7 @@ import time
 
 from apps import resolve as R
 from mjx_damage import outputs
+import tasks
 from tasks import operators
 from train.cliargs import Parser, heartbeat, say_compiling
 from train.record import DEFAULT_CHUNK
@@ -102,7 +103,8 @@ def main(argv=None) -> int:
     D.save_chunks(out, counted(record_chunks(
         env, policy, args.episodes, args.seed, task=args.task,
         episode_length=args.episode_length or R.episode_length_of(env, args.task), chunk=args.chunk,
-        label=args.policy.replace("operator:", ""), env_config=overrides, log=lambda m: print(m, flush=True))),
+        label=args.policy.replace("operator:", ""), env_config=tasks.recorded_kwargs(env, overrides),
+        log=lambda m: print(m, flush=True))),
       overwrite=args.overwrite)
   total_s = time.perf_counter() - t0
   success = np.concatenate([f[0] for f in flags])

@@ -222,5 +222,5 @@ def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
     raise ValueError(f"policy: cannot read checkpoint {file!r} ({e})") from e
   if meta.get("task") not in (None, task):
     raise ValueError(f"policy: checkpoint {path!r} was trained on task {meta['task']!r}, not {task!r}")
-  return dict(meta.get("task_kwargs") or {})
+  return tasks.stored_kwargs(task, meta.get("task_kwargs"))  # an older checkpoint names no robot: the gripper
 

@@ -124,7 +124,8 @@ def main(argv=None) -> int:
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
         "num_devices": len(devices), "processes": jax.process_count(),  # episodes are sharded over them
-        "tasks": tasks, "task_kwargs": overrides, "policies": policies, "seeds": seeds, "fragility": levels,
+        "tasks": tasks, "task_kwargs": {t: R.tasks.recorded_kwargs(t, o) for t, o in overrides.items()},
+        "policies": policies, "seeds": seeds, "fragility": levels,
         "episodes": args.episodes, "safe_threshold": args.safe_threshold, "backend": args.backend,
         "backend_per_task": dict(backends),
         "executables_compiled": res["compiles"],

@@ -121,7 +121,10 @@ def main(argv=None) -> int:
         f"steps ({length * env.dt:.1f} s), feedback {'off' if args.no_feedback else 'on'}, device {platform}",
         flush=True)
   say_compiling(COMPILE_S, platform)
-  kw = dict(policy=policy, feedback=not args.no_feedback, record=args.record, env_config=overrides, label=label,
+  import tasks  # noqa: PLC0415  (loaded by make_task above)
+
+  kw = dict(policy=policy, feedback=not args.no_feedback, record=args.record,
+            env_config=tasks.recorded_kwargs(env, overrides), label=label,
             episode_length=length, steps=args.steps, episodes=args.episodes, seed=args.seed,
             realtime=not args.no_realtime, speed=args.speed, plain=args.plain or args.headless)
   t0 = time.perf_counter()

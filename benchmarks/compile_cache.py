@@ -66,9 +66,10 @@ def run_eval(task: str, policy: str, episodes: int, cache: str, work: str, tag: 
   env["JAX_LOG_COMPILES"] = "1"
   out = os.path.join(work, f"{task}_{tag}.json")
   flags = ["--policy", policy, "--episodes", str(episodes)]
-  # the robot always goes to eval (its default may change); gripper rows show the command as recorded before --robot
+  # the robot always goes to eval and into the shown command: eval's own default is the Panda (rows recorded
+  # before the switch name no robot and ran the gripper)
   argv = ["eval", "--task", task, "--robot", robot, *flags, "--out", out]
-  shown = ["eval", "--task", task, *(["--robot", robot] if robot != "gripper" else []), *flags]
+  shown = ["eval", "--task", task, "--robot", robot, *flags]
   t0 = time.perf_counter()
   p = subprocess.run([sys.executable, "-m", "apps.cli", *argv], cwd=work, env=env, capture_output=True,
                      text=True, timeout=timeout)

@@ -43,7 +43,7 @@ HELD_Z = 0.05  # m: an egg centre above this at the end is still in the hand (it
 
 
 def run(episodes: int, accels, seed: int, robot: str = "gripper") -> dict:
-  env = tasks.make("pick_egg", robot=robot, **tasks.RL_SETTINGS["pick_egg"])
+  env = tasks.make("pick_egg", **{**tasks.RL_SETTINGS["pick_egg"], "robot": robot})  # the RL setting, this robot
   task = env.unwrapped
   names = ["unsafe"] + [f"safe, accel {a:g}" for a in accels]
   policies = [task.policy("unsafe")] + [task.policy("safe", safe_accel=a) for a in accels]
@@ -82,7 +82,8 @@ def run(episodes: int, accels, seed: int, robot: str = "gripper") -> dict:
       row[f"shortcut_gain_gamma_{g:g}_mean"], row[f"shortcut_gain_gamma_{g:g}_min"] = float(d.mean()), float(d.min())
     rows.append(row)
     print(row, flush=True)
-  return {"task": "pick_egg", "settings": tasks.RL_SETTINGS["pick_egg"], "episode_length": length, "rows": rows}
+  settings = {k: v for k, v in tasks.RL_SETTINGS["pick_egg"].items() if k != "robot"}  # the robot: --robot
+  return {"task": "pick_egg", "settings": settings, "episode_length": length, "rows": rows}
 
 
 def render_md(res: dict) -> str:

@@ -61,7 +61,7 @@ def measure(robot: str, episodes: int, seed: int) -> dict:
   from tasks.place_plate import PLATE_REST_Z
   from tasks.robots.interface import FINGER_ACTUATORS
 
-  env = tasks.make("place_plate", robot=robot, **tasks.RL_SETTINGS["place_plate"])
+  env = tasks.make("place_plate", **{**tasks.RL_SETTINGS["place_plate"], "robot": robot})  # the RL setting, this robot
   t = env.unwrapped
   release = 2 * t.plate_half_y + 0.01  # the success test's gap (m)
   rest_z = PLATE_REST_Z + 0.0015  # the success test's resting height (m)

@@ -75,7 +75,7 @@ def main(argv=None) -> int:
   robot = "" if a.robot == "gripper" else f"_{a.robot}"  # gripper: the committed results' name and fields
   a.out = a.out or os.path.join(ROOT, "benchmarks", "results", "place_plate_touchdown" + robot)
   # the gripper is passed explicitly (tasks.robots.DEFAULT may change)
-  env = tasks.make("place_plate", robot=a.robot, **tasks.RL_SETTINGS["place_plate"])
+  env = tasks.make("place_plate", **{**tasks.RL_SETTINGS["place_plate"], "robot": a.robot})  # the RL setting, this robot
   keys = jax.random.split(jax.random.PRNGKey(0), a.episodes)
   rows = []
   for name, (speed, open_at) in POLICIES.items():

@@ -38,6 +38,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import shlex
@@ -282,8 +283,10 @@ def parse_args(argv=None):
     if a.robot not in tasks.robots_for(n):
       raise ValueError(f"--robot: task {n!r} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
     a.settings[n] = tasks.rl_settings(n, a.task_settings)
-    if "robot" in a.settings[n]:  # one place for the robot: the file name and metadata follow --robot
-      raise ValueError(f"task_settings: no 'robot' key (got {a.settings[n]['robot']!r}); give the robot with --robot")
+    given = json.loads(a.task_settings) if a.task_settings else {}  # valid JSON: rl_settings checked it
+    if "robot" in given:  # one place for the robot: the file name and metadata follow --robot
+      raise ValueError(f"task_settings: no 'robot' key (got {given['robot']!r}); give the robot with --robot")
+    a.settings[n].pop("robot", None)  # the RL setting's robot gives way to --robot
   if isinstance(a.episodes, bool) or a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   try:

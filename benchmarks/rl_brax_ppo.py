@@ -179,7 +179,11 @@ def _std_label(row: dict) -> str:
 def _settings_label(row: dict, doc: dict) -> str:
   """The row's task settings where they differ from the file's (the task's RL setting)."""
   s = row.get("task_settings", doc["task_settings"])
-  return "" if s == doc["task_settings"] else ", task " + ", ".join(f"{k}={v}" for k, v in s.items())
+  base = _robot_named(doc["task_settings"]) or {}
+  if _robot_named(s) == base:
+    return ""
+  # the robot only where it is not the file's
+  return ", task " + ", ".join(f"{k}={v}" for k, v in s.items() if k != "robot" or v != base.get("robot"))
 
 
 def _action_label(row: dict) -> str:
@@ -187,10 +191,15 @@ def _action_label(row: dict) -> str:
   return "" if head == "mode" else f", {head} action"
 
 
+def _robot_named(settings: dict | None) -> dict | None:
+  """``settings`` with the robot they ran: rows written before the RL settings named one ran the gripper."""
+  return None if settings is None else {"robot": "gripper", **settings}
+
+
 def _key(row: dict):
   """A rerun with the same weight, seed and settings replaces its row; other rows are kept."""
   return (row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True),
-          json.dumps(row.get("task_settings"), sort_keys=True))
+          json.dumps(_robot_named(row.get("task_settings")), sort_keys=True))
 
 
 def render_md(doc: dict) -> str:

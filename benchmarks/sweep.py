@@ -44,10 +44,9 @@ def main(argv=None) -> int:
 
   name = "sweep_" + ("" if args.robot == ROBOT else args.robot + "_") + args.device
   out = os.path.join(HERE, "results", name + ".json")
-  # mjx-damage sweep's own default is tasks.robots.DEFAULT: name the robot only where it differs, so the
-  # recorded command stays as it was for the gripper while that is the default
-  robot = [] if args.robot == tasks.robots.DEFAULT else ["--robot", args.robot]
-  return sweep_cli.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe"] + robot
+  # always named: mjx-damage sweep's own default is tasks.robots.DEFAULT, the Panda (committed sweeps from
+  # before the switch name no robot and ran the gripper)
+  return sweep_cli.main(["--tasks", task_list, "--policies", "scripted:safe,scripted:unsafe", "--robot", args.robot]
                         + SETTINGS[args.device] + ["--out", out, "--overwrite"] + extra)
 
 

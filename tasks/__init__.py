@@ -67,7 +67,11 @@ _REGISTRY = {
 # The setting each task is trained in with RL, as make() overrides (issue 24, docs/rl_task_design.md: the
 # setting in which the task reward alone prefers the unsafe shortcut). Place Plate: the paper's 6-D
 # observation and in-hand start; Pick Egg: the egg carried to a goal. Tasks not listed: their defaults.
-RL_SETTINGS = {"place_plate": {"obs_mode": "paper"}, "pick_egg": {"goal": "carry"}}
+# The robot is named: the committed RL results were trained with the gripper, which is no longer the
+# default robot (the Panda's Place Plate runs pass --task-settings '{"robot": "panda"}').
+RL_SETTINGS = {"place_plate": {"robot": "gripper", "obs_mode": "paper"},
+               "pick_egg": {"robot": "gripper", "goal": "carry"},
+               "shelve_item": {"robot": "gripper"}}
 
 # Wrapper overrides: make() keyword -> (DamageWrapper keyword, default).
 _WRAPPER_OPTIONS = {
@@ -187,6 +191,33 @@ def make(name: str, **overrides):
   return DamageWrapper(env, **wrapper_kw)
 
 
+# Checkpoints and datasets written before the Panda became the default robot (2026-11-28) name no robot in
+# their stored make() keywords: they ran the gripper. Everything written since names it (recorded_kwargs).
+UNNAMED_ROBOT = "gripper"
+
+
+def recorded_kwargs(env, overrides: dict | None) -> dict:
+  """``overrides`` to store beside an artefact of ``env`` (a :func:`make` result, or a task name to be built
+  with them): with the robot it runs, so the artefact does not depend on the default robot. Envs and names
+  without a robot (built-in scenes, env classes): ``overrides`` unchanged."""
+  if isinstance(env, str):
+    robot = robots.DEFAULT if env in _REGISTRY else None
+  else:
+    robot = getattr(getattr(env, "unwrapped", env), "robot_name", None)
+  out = dict(overrides or {})
+  if robot is not None:
+    out.setdefault("robot", robot)
+  return out
+
+
+def stored_kwargs(name: str, kwargs: dict | None) -> dict:
+  """Stored make() keywords of registry task ``name`` as they ran: no robot named means :data:`UNNAMED_ROBOT`."""
+  out = dict(kwargs or {})
+  if name in _REGISTRY:
+    out.setdefault("robot", UNNAMED_ROBOT)
+  return out
+
+
 def robots_for(name: str) -> list[str]:
   """The robots ``make(name, robot=...)`` accepts (the task's ``supported_robots``, else every robot)."""
   only = task_class(name).supported_robots
@@ -237,7 +268,8 @@ def describe(name: str) -> dict:
       "tracked_entities": [*cls.entities, "agent"],
       "unsafe_shortcut": cls.unsafe_shortcut,
       "safe_strategy": cls.safe_strategy,
-      "horizon": int(cls.default_episode_length),
+      # the default robot's (Task.__init__'s default episode length; the gripper's is default_episode_length)
+      "horizon": int(round(cls.default_episode_length * robots.robot_class(robots.DEFAULT).episode_scale)),
       "robot": robots.DEFAULT,
       "robots": robots_for(name),
       "robot_variants": dict(cls.robot_variants),

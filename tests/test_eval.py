@@ -274,8 +274,10 @@ def _fake_checkpoint(tmp_path, task, task_kwargs):
 
 def test_policy_task_kwargs_are_the_checkpoints(tmp_path):
   run = _fake_checkpoint(tmp_path, "place_plate", {"obs_mode": "paper"})
-  for spec in (f"checkpoint:{run}", f"checkpoint+sample:{run}"):
-    assert resolve.policy_task_kwargs(spec, "place_plate") == {"obs_mode": "paper"}
+  for spec in (f"checkpoint:{run}", f"checkpoint+sample:{run}"):  # no robot named: made before the Panda default
+    assert resolve.policy_task_kwargs(spec, "place_plate") == {"obs_mode": "paper", "robot": "gripper"}
+  panda = _fake_checkpoint(tmp_path / "panda", "place_plate", {"obs_mode": "paper", "robot": "panda"})
+  assert resolve.policy_task_kwargs(f"checkpoint:{panda}", "place_plate") == {"obs_mode": "paper", "robot": "panda"}
   assert resolve.policy_task_kwargs("scripted:safe", "place_plate") == {}
   with pytest.raises(ValueError, match="trained on task 'place_plate', not 'pick_egg'"):
     resolve.policy_task_kwargs(f"checkpoint:{run}", "pick_egg")
@@ -299,7 +301,8 @@ def test_sweep_uses_its_checkpoints_task_overrides_and_refuses_disagreeing_ones(
   (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
   a = _fake_checkpoint(tmp_path / "a", "place_plate", {"obs_mode": "paper"})
   b = _fake_checkpoint(tmp_path / "b", "place_plate", {})
-  assert sweep_cli.trained_overrides("place_plate", ["scripted:safe", f"checkpoint:{a}"]) == {"obs_mode": "paper"}
+  assert sweep_cli.trained_overrides("place_plate", ["scripted:safe", f"checkpoint:{a}"]) == {
+      "obs_mode": "paper", "robot": "gripper"}  # it names no robot: made before the Panda default
   assert sweep_cli.trained_overrides("place_plate", ["scripted:safe", "random"]) == {}
   with pytest.raises(ValueError, match="^policies: the checkpoints were trained with different overrides"):
     sweep_cli.trained_overrides("place_plate", [f"checkpoint:{a}", f"checkpoint+sample:{b}"])

@@ -81,4 +81,4 @@ def test_cli_task_args_build_the_env_and_are_stored(tmp_path):
                  "--episode-length", "4", "--out", str(out)])
   assert rc == 0
   back = D.load(out, task="pick_egg")
-  assert json.loads(back.env_config) == {"goal": "carry"}
+  assert json.loads(back.env_config) == {"goal": "carry", "robot": "gripper"}  # and the robot it ran

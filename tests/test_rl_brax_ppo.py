@@ -59,8 +59,10 @@ def test_task_settings_go_over_the_rl_setting_and_keep_rows_of_other_settings_ap
 def test_reward_preference_takes_the_same_task_settings():
   P = load_benchmark("reward_preference")
   a = P.parse_args(["--tasks", "pick_egg,place_plate", '--task-settings={"episode_length": 60}'])
-  assert a.settings["pick_egg"] == {**R.RL_SETTINGS["pick_egg"], "episode_length": 60}
-  assert a.settings["place_plate"] == {**R.RL_SETTINGS["place_plate"], "episode_length": 60}
+  rl = {n: {k: v for k, v in R.RL_SETTINGS[n].items() if k != "robot"} for n in ("pick_egg", "place_plate")}
+  assert a.settings["pick_egg"] == {**rl["pick_egg"], "episode_length": 60}  # the robot comes from --robot
+  assert a.settings["place_plate"] == {**rl["place_plate"], "episode_length": 60}
+  assert a.robot == "gripper"
   with pytest.raises(ValueError, match="task_settings"):
     P.parse_args(["--tasks", "pick_egg", '--task-settings={"start": "midair"}'])
 

@@ -99,7 +99,7 @@ def test_bad_task_settings_name_the_flag(value, capsys):
 def test_task_settings_reach_the_task_keywords(monkeypatch):
   a = rl_multiseed.parse(["--task", "pick_egg", "--task-settings", '{"start": "pregrasp"}'])
   import tasks
-  assert tasks.rl_settings(a.task, a.task_settings) == {"goal": "carry", "start": "pregrasp"}
+  assert tasks.rl_settings(a.task, a.task_settings) == {"robot": "gripper", "goal": "carry", "start": "pregrasp"}
 
 
 def test_task_settings_over_place_plates_rl_setting_keep_its_observation():

@@ -259,3 +259,39 @@ def test_mobile_base_tasks_refuse_the_wrist_panda_before_compiling(name):
   assert tasks.describe(name)["robots"] == ["gripper", "panda"]
   with pytest.raises(ValueError, match=f"robot: task '{name}' supports gripper, panda only, got 'panda_wrist'"):
     tasks.make(name, robot="panda_wrist")
+
+
+def _default_robot_in_fresh_process(value):
+  """``tasks.robots.DEFAULT`` and ``make``'s robot in a new interpreter with MJX_DAMAGE_ROBOT unset or set."""
+  import subprocess
+  import sys
+
+  env = {k: v for k, v in os.environ.items() if k != "MJX_DAMAGE_ROBOT"}
+  if value is not None:
+    env["MJX_DAMAGE_ROBOT"] = value
+  code = ("import tasks; print(tasks.robots.DEFAULT, tasks.default_config('place_plate')['robot'], "
+          "tasks.describe('place_plate')['robot'])")
+  return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+
+
+def test_the_panda_is_the_default_robot_and_the_variable_chooses_another():
+  r = _default_robot_in_fresh_process(None)
+  assert r.returncode == 0, r.stderr[-2000:]
+  assert r.stdout.split() == ["panda", "panda", "panda"]
+  r = _default_robot_in_fresh_process("gripper")
+  assert r.returncode == 0 and r.stdout.split() == ["gripper", "gripper", "gripper"], r.stderr[-2000:]
+  r = _default_robot_in_fresh_process("ur5")
+  assert r.returncode != 0 and "MJX_DAMAGE_ROBOT: unknown robot 'ur5'" in r.stderr
+
+
+def test_artefacts_name_their_robot():
+  """What is stored beside a checkpoint or dataset names the robot it ran; older ones (no robot) ran the
+  gripper."""
+  env = tasks.make("place_plate", robot="panda")
+  assert tasks.recorded_kwargs(env, {"obs_mode": "paper"}) == {"obs_mode": "paper", "robot": "panda"}
+  assert tasks.recorded_kwargs(env, {"robot": "panda"}) == {"robot": "panda"}
+  assert tasks.stored_kwargs("place_plate", {"obs_mode": "paper"}) == {"obs_mode": "paper", "robot": "gripper"}
+  assert tasks.stored_kwargs("place_plate", {"robot": "panda"}) == {"robot": "panda"}
+  assert tasks.stored_kwargs("pkg.mod:Env", {"x": 1}) == {"x": 1}  # an env class takes no robot
+  assert tasks.recorded_kwargs("place_plate", {}) == {"robot": tasks.robots.DEFAULT}  # a name: the default
+  assert tasks.recorded_kwargs("drop", {}) == {}  # a built-in scene has no robot

@@ -137,7 +137,7 @@ def test_pick_egg_goal_knob():
     with pytest.raises(ValueError, match="goal"):
       tasks.make("pick_egg", goal=bad)
   assert tasks.default_config("pick_egg")["goal"] == "lift"
-  assert tasks.RL_SETTINGS["pick_egg"] == {"goal": "carry"}
+  assert tasks.RL_SETTINGS["pick_egg"] == {"robot": "gripper", "goal": "carry"}
   lift, carry = tasks.make("pick_egg").unwrapped, tasks.make("pick_egg", goal="carry").unwrapped
   assert (lift.episode_length, lift.observation_size) == (80, 14)
   assert (carry.episode_length, carry.observation_size) == (100, 17)  # + the goal

@@ -21,6 +21,16 @@ def _find_damage_wrapper(env) -> Optional[DamageWrapper]:
   return None
 
 
+def recorded_task_kwargs(task, env: Env, task_kwargs: Optional[dict]) -> dict:
+  """``task_kwargs`` to store with a checkpoint: a registry task's with its robot named
+  (``tasks.recorded_kwargs``), so the checkpoint does not depend on the default robot; others unchanged."""
+  if isinstance(task, str) and ":" not in task:
+    import tasks as task_registry
+
+    return task_registry.recorded_kwargs(env, task_kwargs)
+  return dict(task_kwargs or {})
+
+
 def resolve_task(task, task_kwargs: Optional[dict] = None) -> tuple[Env, str]:
   """``task`` → (damage-wrapped single env, name).
 

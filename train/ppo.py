@@ -43,7 +43,7 @@ from train import memory as MEM
 from train import distributed
 from train import mesh as M
 from train.config import RESUMABLE_CHANGES, PPOConfig
-from train.envs import resolve_task, safe_threshold_of, task_episode_length  # noqa: F401  (public here too)
+from train.envs import recorded_task_kwargs, resolve_task, safe_threshold_of, task_episode_length  # noqa: F401
 from train.iteration import Trainer, TrainState, scheduled_weight, shape_reward  # noqa: F401
 from train.multipliers import lagrange_update  # noqa: F401
 from train.policy import load_policy  # noqa: F401
@@ -266,7 +266,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     if main:
       os.makedirs(out_dir, exist_ok=True)
       writes = out_dir
-  meta = {"task": task_name, "task_kwargs": task_kwargs or {}, "preset": preset, "config": cfg.to_json(),
+  meta = {"task": task_name, "task_kwargs": recorded_task_kwargs(task, env, task_kwargs), "preset": preset,
+          "config": cfg.to_json(),
           "obs_size": trainer.obs_size, "action_size": trainer.action_size, "steps_per_iteration": spi,
           "init_from": None if init_file is None else os.path.abspath(init_file),
           "devices": len(devs), "mesh": dict(mesh.shape), "processes": jax.process_count()}
