@@ -177,6 +177,21 @@ def add_task_policy_arguments(ap) -> None:
   ap.add_argument("--policy", required=True, help=" | ".join(POLICY_SPECS))
 
 
+def robot_task_kwargs(task: str, robot: str, default: str) -> Optional[dict]:
+  """``tasks.make`` keywords of a script's ``--task`` and ``--robot`` (``default``: the script's own robot):
+  ``{"robot": robot}`` for a registry task that runs it; None for an env class, which takes no robot and
+  accepts only ``default``. ``ValueError`` naming ``--robot``, before anything is built."""
+  if robot not in tasks.robots.names():
+    raise ValueError(f"--robot: unknown robot {robot!r}; valid: {', '.join(tasks.robots.names())}")
+  if ":" in task:
+    if robot != default:
+      raise ValueError(f"--robot: only for a registered --task, not the env class {task!r}")
+    return None
+  if task in tasks.names() and robot not in tasks.robots_for(task):
+    raise ValueError(f"--robot: task {task!r} supports {', '.join(tasks.robots_for(task))} only, not {robot!r}")
+  return {"robot": robot}
+
+
 def add_task_override_arguments(ap) -> None:
   """``--robot`` and ``--task-arg KEY=JSON`` (repeatable): keyword arguments of ``tasks.make`` on a command line."""
   ap.add_argument("--robot", default=None, help="robot of a registry task, e.g. panda (default: the task's)")

@@ -57,6 +57,7 @@ ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may diff
 
 def parse(argv=None):
   import tasks  # the registry's robots (no JAX backend starts here)
+  from apps import resolve as R
 
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--task", default="place_plate")
@@ -74,14 +75,10 @@ def parse(argv=None):
   p.add_argument("--sequence", default="shardy:one,shardy:async,shardy:one,shardy:async",
                  help="comma-separated PARTITIONER:MODE steps, timed in this order (module docstring)")
   a = p.parse_args(argv)
-  if a.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if ":" in a.task:  # an env class: no robot to pick
-    if a.robot != ROBOT:
-      p.error(f"--robot: only for a registered --task, not the env class {a.task!r}")
-  elif a.task in tasks.names() and a.robot not in tasks.robots_for(a.task):
-    p.error(f"--robot: task {a.task!r} supports {', '.join(tasks.robots_for(a.task))} only, not {a.robot!r}")
-  a.task_kwargs = None if ":" in a.task else {"robot": a.robot}
+  try:  # an env class takes no robot: task_kwargs None
+    a.task_kwargs = R.robot_task_kwargs(a.task, a.robot, ROBOT)
+  except ValueError as e:
+    p.error(str(e))
   a.sequence = [tuple(x.split(":")) for x in a.sequence.split(",")]
   bad = [":".join(x) for x in a.sequence if len(x) != 2 or x[0] not in PARTITIONERS or x[1] not in MODES]
   if bad:

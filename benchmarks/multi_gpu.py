@@ -72,6 +72,7 @@ CURVE_KEYS = ("eval/safe_completion", "eval/completion", "eval/episode_cost", "e
 
 def parse(argv=None):
   import tasks  # the registry's robots (no JAX backend starts here: distributed.initialize comes first)
+  from apps import resolve as R
 
   p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--task", default="place_plate", help="registered task, or package.module:EnvClass")
@@ -107,14 +108,10 @@ def parse(argv=None):
                  help="merge into an earlier results file: keep its other device counts, and the parts of these "
                       "device counts that this call does not time (each part records its own command)")
   args = p.parse_args(argv)
-  if args.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if ":" in args.task:  # an env class: no robot to pick
-    if args.robot != ROBOT:
-      p.error(f"--robot: only for a registered --task, not the env class {args.task!r}")
-  elif args.task in tasks.names() and args.robot not in tasks.robots_for(args.task):
-    p.error(f"--robot: task {args.task!r} supports {', '.join(tasks.robots_for(args.task))} only, not {args.robot!r}")
-  args.task_kwargs = None if ":" in args.task else {"robot": args.robot}
+  try:  # an env class takes no robot: task_kwargs None
+    args.task_kwargs = R.robot_task_kwargs(args.task, args.robot, ROBOT)
+  except ValueError as e:
+    p.error(str(e))
   try:
     args.setup = distributed.check(None, args.coordinator, args.num_processes, args.process_id)
   except ValueError as e:
