@@ -16,6 +16,7 @@ import jax
 from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json
+import tasks
 from train import evaluate as E
 from train.cliargs import Parser, heartbeat, say_compiling
 
@@ -85,7 +86,7 @@ def main(argv=None) -> int:
   if res["program"] == "loaded":
     print("traced program loaded from the cache (no tracing, no compiling)")
   result = {
-      "task": args.task, "task_kwargs": R.tasks.recorded_kwargs(args.task, overrides), "policy": args.policy,
+      "task": args.task, "task_kwargs": tasks.recorded_kwargs(args.task, overrides), "policy": args.policy,
       "episodes": args.episodes,
       "seed": args.seed,
       "fragility": args.fragility, "episode_length": res["episode_length"], "backend": backend,

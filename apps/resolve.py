@@ -181,14 +181,11 @@ def robot_task_kwargs(task: str, robot: str, default: str) -> Optional[dict]:
   """``tasks.make`` keywords of a script's ``--task`` and ``--robot`` (``default``: the script's own robot):
   ``{"robot": robot}`` for a registry task that runs it; None for an env class, which takes no robot and
   accepts only ``default``. ``ValueError`` naming ``--robot``, before anything is built."""
-  if robot not in tasks.robots.names():
-    raise ValueError(f"--robot: unknown robot {robot!r}; valid: {', '.join(tasks.robots.names())}")
+  tasks.check_robot(robot, [task], "--robot")
   if ":" in task:
     if robot != default:
       raise ValueError(f"--robot: only for a registered --task, not the env class {task!r}")
     return None
-  if task in tasks.names() and robot not in tasks.robots_for(task):
-    raise ValueError(f"--robot: task {task!r} supports {', '.join(tasks.robots_for(task))} only, not {robot!r}")
   return {"robot": robot}
 
 

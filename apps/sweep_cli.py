@@ -19,6 +19,7 @@ import jax
 from apps import resolve as R
 from mjx_damage import outputs
 from mjx_damage.io import write_json, write_text
+from tasks import recorded_kwargs
 from train import distributed
 from train import sweep as S
 from train.cliargs import Parser, heartbeat, say_compiling
@@ -124,7 +125,7 @@ def main(argv=None) -> int:
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "device": jax.devices()[0].device_kind, "platform": jax.devices()[0].platform,
         "num_devices": len(devices), "processes": jax.process_count(),  # episodes are sharded over them
-        "tasks": tasks, "task_kwargs": {t: R.tasks.recorded_kwargs(t, o) for t, o in overrides.items()},
+        "tasks": tasks, "task_kwargs": {t: recorded_kwargs(t, o) for t, o in overrides.items()},
         "policies": policies, "seeds": seeds, "fragility": levels,
         "episodes": args.episodes, "safe_threshold": args.safe_threshold, "backend": args.backend,
         "backend_per_task": dict(backends),

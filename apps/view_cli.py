@@ -30,6 +30,7 @@ from apps.viewer import episode as EP
 from apps.viewer import keys as K
 from mjx_damage import outputs
 from mjx_damage.io import atomic_path
+import tasks
 from train.cliargs import Parser, say_compiling
 
 COMPILE_S = {"cpu": 40, "gpu": 40}  # rough first compile of a task's reset and step functions, s
@@ -121,8 +122,6 @@ def main(argv=None) -> int:
         f"steps ({length * env.dt:.1f} s), feedback {'off' if args.no_feedback else 'on'}, device {platform}",
         flush=True)
   say_compiling(COMPILE_S, platform)
-  import tasks  # noqa: PLC0415  (loaded by make_task above)
-
   kw = dict(policy=policy, feedback=not args.no_feedback, record=args.record,
             env_config=tasks.recorded_kwargs(env, overrides), label=label,
             episode_length=length, steps=args.steps, episodes=args.episodes, seed=args.seed,

@@ -131,10 +131,10 @@ def main(argv=None) -> int:
   size.update({k: getattr(args, k) for k in FULL if getattr(args, k) is not None})
   if args.task not in tasks.names():
     ap.error(f"--task: unknown task {args.task!r}")
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if args.robot not in tasks.robots_for(args.task):
-    ap.error(f"--robot: {args.task} supports {', '.join(tasks.robots_for(args.task))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, [args.task], "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   for k, v in size.items():
     if not (v >= 0 if k in ("warmup", "damage_weight") else v > 0):  # also refuses NaN
       ap.error(f"--{k.replace('_', '-')}: must be {'>= 0' if k in ('warmup', 'damage_weight') else '> 0'}, got {v}")

@@ -97,11 +97,10 @@ def main(argv=None) -> int:
   args = ap.parse_args(argv)
   import tasks  # checked here, before any eval process starts
 
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  for task in args.tasks:
-    if task in tasks.names() and args.robot not in tasks.robots_for(task):
-      ap.error(f"--robot: task {task!r} supports {', '.join(tasks.robots_for(task))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, args.tasks, "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   robot = "" if args.robot == "gripper" else f"{args.robot}_"  # gripper: the committed results' names and fields
   args.out = args.out or os.path.join(ROOT, "benchmarks", "results", f"compile_cache_{robot}cpu")
   cmd = "python benchmarks/compile_cache.py" + "".join(f" {a}" for a in (sys.argv[1:] if argv is None else argv))

@@ -99,13 +99,11 @@ def main(argv=None) -> int:
                       "committed results)")
   p.add_argument("--episodes", type=int, default=64, help="episodes per policy in the compiled batch")
   a = p.parse_args(argv)
-  if a.robot not in tasks.robots.names():
-    raise ValueError(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  tasks.check_robot(a.robot, (), "--robot")
   names = tasks.select(None, a.robot) if a.tasks is None else [n for n in a.tasks.split(",") if n]
   for n in names:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
-    if a.robot not in tasks.robots_for(n):
-      raise ValueError(f"--robot: {n} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
+  tasks.check_robot(a.robot, names, "--robot")
   if a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   command = "PYTHONPATH=. .venv/bin/python benchmarks/compile_time.py " + " ".join(

@@ -80,13 +80,13 @@ def main(argv=None) -> int:
                  help=f"robot of every task ({', '.join(tasks.robots.names())}; default gripper: the robot of the "
                       "committed results)")
   a = p.parse_args(argv)
-  if a.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
   names = [n for n in a.tasks.split(",") if n]
   for n in names:
     tasks.task_class(n)
-    if a.robot not in tasks.robots_for(n):
-      p.error(f"--robot: {n} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
+  try:
+    tasks.check_robot(a.robot, names, "--robot")
+  except ValueError as e:
+    p.error(str(e))
   command = ".venv/bin/python benchmarks/constraint_share.py " + " ".join(sys.argv[1:] if argv is None else argv)
   rows = []
   for n in names:

@@ -176,10 +176,10 @@ def check_robot(p: argparse.ArgumentParser, robot: str, task: str, keep_flags: b
       os.environ.pop("XLA_FLAGS", None)
     else:
       os.environ["XLA_FLAGS"] = saved
-  if robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if task in tasks.names() and robot not in tasks.robots_for(task):
-    p.error(f"--robot: {task} supports {', '.join(tasks.robots_for(task))} only, got {robot!r}")
+  try:
+    tasks.check_robot(robot, [task], "--robot")
+  except ValueError as e:
+    p.error(str(e))
 
 
 def main(argv=None) -> int:

@@ -289,11 +289,10 @@ def main(argv=None) -> int:
   for t in names:
     if t not in tasks.names():
       p.error(f"--tasks: unknown task {t!r}; valid: {', '.join(tasks.names())}")
-  if args.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  for t in names:
-    if args.robot not in tasks.robots_for(t):
-      p.error(f"--robot: {t} supports {', '.join(tasks.robots_for(t))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, names, "--robot")
+  except ValueError as e:
+    p.error(str(e))
   if args.envs < 2 or args.envs % 2:
     p.error(f"--envs: an even number >= 2, got {args.envs}")
   if args.steps < 3:

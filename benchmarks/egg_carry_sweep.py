@@ -114,10 +114,7 @@ def main(argv=None) -> int:
   p.add_argument("--robot", default="gripper",
                  help=f"robot ({', '.join(tasks.robots.names())}; default gripper: the robot of the committed results)")
   a = p.parse_args(argv)
-  if a.robot not in tasks.robots.names():
-    raise ValueError(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if a.robot not in tasks.robots_for("pick_egg"):
-    raise ValueError(f"--robot: pick_egg supports {', '.join(tasks.robots_for('pick_egg'))} only, got {a.robot!r}")
+  tasks.check_robot(a.robot, ["pick_egg"], "--robot")
   if isinstance(a.episodes, bool) or a.episodes < 1:
     raise ValueError(f"episodes: must be >= 1, got {a.episodes}")
   try:

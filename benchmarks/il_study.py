@@ -126,11 +126,10 @@ def parse(argv):
   bad = [t for t in args.tasks if t not in tasks.names()]
   if bad:
     p.error(f"--tasks: unknown {bad}; valid: {', '.join(tasks.names())}")
-  if args.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  other = [t for t in args.tasks if args.robot not in tasks.robots_for(t)]
-  if other:
-    p.error(f"--robot: {', '.join(other)} run(s) without {args.robot!r} (tasks.robots_for)")
+  try:
+    tasks.check_robot(args.robot, args.tasks, "--robot")
+  except ValueError as e:
+    p.error(str(e))
   if not 0 <= args.min_health <= 100 or args.max_damage < 0:
     p.error("--min-health must be in [0, 100] and --max-damage >= 0")
   return args

@@ -47,10 +47,10 @@ def parse(argv):
 
   if a.task not in tasks.names():
     p.error(f"--task: unknown {a.task!r}; valid: {', '.join(tasks.names())}")
-  if a.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if a.robot not in tasks.robots_for(a.task):
-    p.error(f"--robot: {a.task} supports {', '.join(tasks.robots_for(a.task))} only, got {a.robot!r}")
+  try:
+    tasks.check_robot(a.robot, [a.task], "--robot")
+  except ValueError as e:
+    p.error(str(e))
   if a.operator not in operators.CONDITIONS:
     p.error(f"--operator: one of {', '.join(operators.CONDITIONS)}, got {a.operator!r}")
   for k in ("demos", "seeds", "steps", "eval_episodes"):

@@ -137,10 +137,10 @@ def main(argv=None) -> int:
   import tasks
   if args.task not in tasks.names():
     ap.error(f"--task: unknown {args.task!r}")
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if args.robot not in tasks.robots_for(args.task):
-    ap.error(f"--robot: {args.task} supports {', '.join(tasks.robots_for(args.task))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, [args.task], "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   dev = jax.devices()[0]
   rows = [measure(args.task, v, args.envs, args.substeps, args.repeats, args.hlo_dir, args.robot) for v in variants]
   result = {"command": "python benchmarks/liquid_speed.py " + shlex.join(sys.argv[1:] if argv is None else argv),

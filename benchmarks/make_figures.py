@@ -146,11 +146,10 @@ def main(argv=None) -> int:
   args = ap.parse_args(argv)
   import tasks
 
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  other = [n for n in args.figures if args.robot not in tasks.robots_for(n)]
-  if other:
-    ap.error(f"--robot: {', '.join(other)} run(s) without {args.robot!r} (tasks.robots_for)")
+  try:
+    tasks.check_robot(args.robot, args.figures, "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   if args.out is None:  # another robot's figures beside the README's, not over them
     sub = [] if args.robot == "gripper" else [f"seeing_damage_{args.robot}"]
     args.out = os.path.join(ROOT, "docs", "figures", *sub)

@@ -76,11 +76,10 @@ def main(argv=None) -> int:
                        "the robot of the committed results)")
   args = ap.parse_args(argv)
   # checked before anything compiles; the gripper is passed explicitly (tasks.robots.DEFAULT may change)
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  for task in args.tasks.split(","):
-    if task in tasks.names() and args.robot not in tasks.robots_for(task):
-      ap.error(f"--robot: task {task!r} supports {', '.join(tasks.robots_for(task))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, args.tasks.split(","), "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   lo, hi = (int(s) for s in args.sizes.split(","))
   slug, desc = device_info()
   rows = []

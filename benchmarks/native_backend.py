@@ -294,11 +294,10 @@ def main(argv=None) -> int:
                       "the robot of the committed results; the K-box scene has none)")
   args = p.parse_args(argv)
   # checked before anything is built; the gripper is passed explicitly (tasks.robots.DEFAULT may change)
-  if args.robot not in tasks.robots.names():
-    p.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  if not (args.skip_throughput and args.skip_peaks) and args.task in tasks.names() and (
-      args.robot not in tasks.robots_for(args.task)):
-    p.error(f"--robot: task {args.task!r} supports {', '.join(tasks.robots_for(args.task))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, [] if args.skip_throughput and args.skip_peaks else [args.task], "--robot")
+  except ValueError as e:
+    p.error(str(e))
   try:
     args.box_ks = [int(k) for k in args.boxes.split(",") if k.strip()]
   except ValueError:

@@ -34,9 +34,12 @@ def parse(argv):
   p.add_argument("--robot", default="gripper",
                  help="robot of the task (tasks.robots.names(); default: gripper, the robot of the committed results)")
   a = p.parse_args(argv)
-  from tasks import robots  # checked before anything compiles; the gripper is passed explicitly (DEFAULT may change)
-  if a.robot not in robots.names():
-    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(robots.names())}")
+  import tasks  # checked before anything compiles; the gripper is passed explicitly (DEFAULT may change)
+
+  try:
+    tasks.check_robot(a.robot, ["place_plate"], "--robot")
+  except ValueError as e:
+    p.error(str(e))
   if a.out is None:
     robot = "" if a.robot == "gripper" else f"{a.robot}_"  # gripper: the committed results' name
     a.out = os.path.join(ROOT, "benchmarks", "results", f"paper_preset_sgd_steps_{robot}cpu.md")

@@ -70,8 +70,10 @@ def main(argv=None) -> int:
   a = p.parse_args(argv)
   if a.episodes < 1:
     p.error(f"--episodes: must be >= 1, got {a.episodes}")
-  if a.robot not in tasks.robots_for("place_plate"):
-    p.error(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots_for('place_plate'))}")
+  try:
+    tasks.check_robot(a.robot, ["place_plate"], "--robot")
+  except ValueError as e:
+    p.error(str(e))
   robot = "" if a.robot == "gripper" else f"_{a.robot}"  # gripper: the committed results' name and fields
   a.out = a.out or os.path.join(ROOT, "benchmarks", "results", "place_plate_touchdown" + robot)
   # the gripper is passed explicitly (tasks.robots.DEFAULT may change)

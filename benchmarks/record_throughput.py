@@ -122,14 +122,14 @@ def main(argv=None) -> int:
                   help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
                        "the robot of the committed results)")
   args = ap.parse_args(argv)
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
   names = [t for t in args.tasks.split(",") if t]
   for t in names:
     if t not in tasks.names():
       ap.error(f"--tasks: unknown task {t!r}")
-    if args.robot not in tasks.robots_for(t):
-      ap.error(f"--robot: task {t!r} supports {', '.join(tasks.robots_for(t))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, names, "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   if args.operator not in operators.CONDITIONS:
     ap.error(f"--operator: one of {', '.join(operators.CONDITIONS)}, got {args.operator!r}")
   for k in ("episodes", "steady_episodes", "chunk"):

@@ -274,14 +274,12 @@ def parse_args(argv=None):
                  help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, the robot "
                       "of the committed results); the results file gets _ROBOT unless it is the gripper")
   a = p.parse_args(argv)
-  if a.robot not in tasks.robots.names():
-    raise ValueError(f"--robot: unknown robot {a.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  tasks.check_robot(a.robot, (), "--robot")
   a.task_list = [n for n in a.tasks.split(",") if n]
   a.settings = {}
   for n in a.task_list:
     tasks.task_class(n)  # ValueError listing the valid names, before anything compiles
-    if a.robot not in tasks.robots_for(n):
-      raise ValueError(f"--robot: task {n!r} supports {', '.join(tasks.robots_for(n))} only, got {a.robot!r}")
+    tasks.check_robot(a.robot, [n], "--robot")
     a.settings[n] = tasks.rl_settings(n, a.task_settings)
     given = json.loads(a.task_settings) if a.task_settings else {}  # valid JSON: rl_settings checked it
     if "robot" in given:  # one place for the robot: the file name and metadata follow --robot

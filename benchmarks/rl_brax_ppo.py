@@ -192,8 +192,8 @@ def _action_label(row: dict) -> str:
 
 
 def _robot_named(settings: dict | None) -> dict | None:
-  """``settings`` with the robot they ran: rows written before the RL settings named one ran the gripper."""
-  return None if settings is None else {"robot": "gripper", **settings}
+  """``settings`` with the robot they ran (rows written before the RL settings named one: tasks.UNNAMED_ROBOT)."""
+  return None if settings is None else {"robot": tasks.UNNAMED_ROBOT, **settings}
 
 
 def _key(row: dict):

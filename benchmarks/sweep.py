@@ -37,8 +37,10 @@ def main(argv=None) -> int:
     os.environ.setdefault("JAX_PLATFORMS", "cpu")
   import tasks
 
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
+  try:
+    tasks.check_robot(args.robot, (), "--robot")
+  except ValueError as e:
+    ap.error(str(e))
   task_list = args.tasks or ",".join(tasks.select(None, args.robot))
   from apps import sweep_cli
 

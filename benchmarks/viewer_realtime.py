@@ -122,15 +122,15 @@ def main(argv=None) -> int:
                   help=f"robot of every task, one of {', '.join(tasks.robots.names())} (default: gripper, "
                        "the robot of the committed results)")
   args = ap.parse_args(argv)
-  if args.robot not in tasks.robots.names():
-    ap.error(f"--robot: unknown robot {args.robot!r}; valid: {', '.join(tasks.robots.names())}")
-  names = ([n for n in args.tasks.split(",") if n] if args.tasks is not None
-           else [n for n in tasks.names() if args.robot in tasks.robots_for(n)])
-  for n in names:
+  names = [n for n in args.tasks.split(",") if n] if args.tasks is not None else None
+  for n in names or ():
     if n not in tasks.names():
       ap.error(f"tasks: unknown task {n!r}; valid: {', '.join(tasks.names())}")
-    if args.robot not in tasks.robots_for(n):
-      ap.error(f"--robot: task {n!r} supports {', '.join(tasks.robots_for(n))} only, got {args.robot!r}")
+  try:
+    tasks.check_robot(args.robot, names or (), "--robot")
+  except ValueError as e:
+    ap.error(str(e))
+  names = names if names is not None else tasks.select(None, args.robot)
   if X.xvfb_path() is None:
     print("viewer_realtime: needs Xvfb (apt-get install xvfb)", file=sys.stderr)
     return 1

@@ -224,11 +224,20 @@ def robots_for(name: str) -> list[str]:
   return [r for r in robots.names() if only is None or r in only]
 
 
+def check_robot(robot: str, chosen=(), field: str = "robot") -> None:
+  """``ValueError`` naming ``field`` (a script's ``--robot``) unless ``robot`` is registered and runs every
+  registry task in ``chosen``; other names (built-in scenes, env classes) are left to their own checks."""
+  if robot not in robots.names():
+    raise ValueError(f"{field}: unknown robot {robot!r} (valid: {', '.join(robots.names())})")
+  other = [t for t in chosen if t in _REGISTRY and robot not in robots_for(t)]
+  if other:
+    raise ValueError(f"{field}: {', '.join(other)} run(s) without {robot!r} (tasks.robots_for)")
+
+
 def select(chosen=None, robot: str = "gripper") -> list[str]:
   """Task names for a script's ``--tasks`` with ``--robot``: ``chosen`` checked, in order, or (None) every
   task ``robot`` runs. ``ValueError`` naming ``tasks`` or ``robot`` (before anything is built)."""
-  if robot not in robots.names():
-    raise ValueError(f"robot: unknown robot {robot!r} (valid: {', '.join(robots.names())})")
+  check_robot(robot)
   if chosen is None:
     return [t for t in names() if robot in robots_for(t)]
   chosen = list(chosen)
@@ -237,9 +246,7 @@ def select(chosen=None, robot: str = "gripper") -> list[str]:
     raise ValueError(f"tasks: unknown task(s) {', '.join(unknown)} (valid: {', '.join(names())})")
   if len(set(chosen)) != len(chosen):
     raise ValueError(f"tasks: listed twice: {', '.join(sorted({t for t in chosen if chosen.count(t) > 1}))}")
-  other = [t for t in chosen if robot not in robots_for(t)]
-  if other:
-    raise ValueError(f"robot: {', '.join(other)} run(s) without {robot!r} (tasks.robots_for)")
+  check_robot(robot, chosen)
   return chosen
 
 
