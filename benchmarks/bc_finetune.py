@@ -219,7 +219,9 @@ def main(argv=None) -> int:
   base = os.path.join(args.results_dir,
                       f"bc_finetune_{args.task}{robot_part}_{slug}" + (f"_{args.tag}" if args.tag else ""))
   write_json(base + ".json", result)
-  lines = [f"# BC → PPO fine-tuning with the damage penalty: {args.task} ({desc})", "",
+  reward = ("task reward only" if size["damage_weight"] == 0
+            else f"the damage penalty (w = {size['damage_weight']:g})")
+  lines = [f"# BC → PPO fine-tuning with {reward}: {args.task} ({desc})", "",
            f"Command: `{result['command']}`", "",
            f"Dataset: successful {args.demos_from} demonstrations, "
            + " + ".join(f"{n} {k}" for k, n in kept.items()) + f" (of {recorded} recorded each, at most "
