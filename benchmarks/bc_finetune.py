@@ -6,8 +6,8 @@ One command:
    (:mod:`tasks.operators`: noisy, closed-loop variants of the task's safe and
    unsafe scripts) through the compiled batched step (:func:`train.record.record`),
    keeping up to ``--demos`` successful ones of each (a mixed-quality dataset, like
-   the paper's 25 + 25 human demonstrations; ``--demos-from scripted`` takes the
-   deterministic scripts instead);
+   the paper's 25 + 25 human demonstrations; ``--demos-from careful`` takes the careful
+   operator alone, ``--demos-from scripted`` the deterministic scripts instead);
 2. behaviour-clone them into the PPO actor (``--policy-hidden``, default 512×3),
    one network per seed in one call (:func:`train.bc_actor.fit_actor`);
 
@@ -76,7 +76,7 @@ QUICK = dict(demos=24, record=24, seeds=2, bc_steps=2000, eval_episodes=32, num_
 FINETUNE = dict(learning_rate=1e-4, entropy_cost=0.0, target_kl=0.0)  # target_kl 0: none
 CURVE_KEYS = ("eval/completion", "eval/safe_completion", "eval/episode_cost", "train/episode_completion",
               "train/episode_cost")
-SOURCES = {"operators": ("careful", "careless"), "scripted": ("safe", "unsafe")}
+SOURCES = {"operators": ("careful", "careless"), "scripted": ("safe", "unsafe"), "careful": ("careful",)}
 
 
 def eval_checkpoint(run_dir: str, env, seeds, episodes: int, deterministic: bool = True) -> list[dict]:
@@ -112,7 +112,9 @@ def main(argv=None) -> int:
   ap.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   ap.add_argument("--demos-from", choices=tuple(SOURCES), default="operators",
                   help="operators: the noisy careful/careless operators (tasks.operators), --record episodes each; "
-                       "scripted: the deterministic safe/unsafe scripts, --demos episodes each")
+                       "scripted: the deterministic safe/unsafe scripts, --demos episodes each; careful: the "
+                       "careful operator alone (one strategy: a Gaussian clone of two strategies takes their mean "
+                       "where they part)")
   ap.add_argument("--policy-hidden", default="512,512,512",
                   help="actor hidden sizes of BC and fine-tuning (the preset's 32×4 cannot hold the demonstrator)")
   ap.add_argument("--budget-seconds", type=float, default=None,
@@ -160,9 +162,9 @@ def main(argv=None) -> int:
   # 1. a mixed dataset: up to --demos successful episodes from each source. Noisy operators by default:
   # a BC actor of the deterministic scripts never sees a state off their path and drifts (0 % completion
   # on move_glass_of_water and pick_egg in the CPU check), the operators' corrected tremor shows recoveries.
-  parts, recorded = {}, size["record"] if args.demos_from == "operators" else size["demos"]
+  parts, recorded = {}, size["demos"] if args.demos_from == "scripted" else size["record"]
   for i, source in enumerate(SOURCES[args.demos_from]):
-    policy = (operators.make(env, source) if args.demos_from == "operators" else tasks.scripted_policy(env, source))
+    policy = (tasks.scripted_policy(env, source) if args.demos_from == "scripted" else operators.make(env, source))
     ds = record(env, policy, recorded, seed=100 + i, task=args.task, episode_length=T,
                 chunk=min(size["chunk"], recorded), label=source)
     ok = np.flatnonzero(np.asarray(ds.success))[: size["demos"]]
