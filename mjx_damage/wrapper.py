@@ -15,6 +15,20 @@ and ``metrics["action_sanitised"]`` f32[] (action entries sanitised this step);
 it shapes ``reward ← reward − weight·cost``, optionally appends entity health
 / 100 to the observation and ends the episode when an entity's health reaches 0.
 
+**A physics step that diverges ends the episode.** MJX can, very rarely, return
+a non-finite state (seen once: within the first 2.6 M env steps per seed of
+PPO on shelve_item from a cloned policy). When the new ``qpos``, ``qvel``,
+observation, reward, cost or link health is not all finite, the step is marked
+``done`` and ``metrics["physics_diverged"] = 1`` (counted per episode in
+``damage_episode["physics_diverged"]``); everything a learner or an evaluator
+reads stays finite: the observation is the previous one, the reward the
+previous task reward, the damage state (and so health) the previous one, the
+step's cost 0, the step's success 0 and the task's other metrics 0. The
+physics state itself is left as MJX returned it: Brax's ``AutoResetWrapper``
+replaces it, and an evaluator freezes the episode at its first ``done``.
+Without this, one such step puts NaN into a training batch and the whole run
+(every seed of one program) stops.
+
 Two modes:
 
 * **Per substep** — the env steps through :func:`mjx_damage.physics.step`
@@ -81,7 +95,17 @@ def sanitise_action(action: jax.Array, lo: float = -1.0, hi: float = 1.0) -> tup
 
 def _zero_episode():
   z = jnp.zeros((), jnp.float32)
-  return {"completed": z, "cost": z, "length": z, "damaged": z, "action_sanitised": z}
+  return {"completed": z, "cost": z, "length": z, "damaged": z, "action_sanitised": z, "physics_diverged": z}
+
+
+def _all_finite(tree) -> jax.Array:
+  """bool[]: every entry of every leaf of ``tree`` is finite."""
+  return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
+
+
+def _keep(ok: jax.Array, new, old):
+  """``new`` where ``ok``, else ``old`` (two pytrees of one structure)."""
+  return jax.tree.map(lambda a, b: jnp.where(ok, a, b), new, old)
 
 
 class DamageWrapper(Wrapper):
@@ -179,6 +203,7 @@ class DamageWrapper(Wrapper):
     metrics = dict(state.metrics)
     metrics.update(self._metrics(info))
     metrics["action_sanitised"] = jnp.zeros((), jnp.float32)
+    metrics["physics_diverged"] = jnp.zeros((), jnp.float32)
     return state.replace(obs=self._obs(state.obs, info), info=info, metrics=metrics)
 
   def step(self, state: State, action: jax.Array) -> State:
@@ -199,28 +224,40 @@ class DamageWrapper(Wrapper):
       ds = physics.begin_step(info["damage_state"])
       nstate = self.env.step(inner, action)
       ds = self._fallback_damage(nstate, ds)
+    cost = jnp.sum(ds.step_damage.total())
+    d = nstate.pipeline_state
+    ok = (_all_finite(d.qpos) & _all_finite(d.qvel) & _all_finite(nstate.obs) & jnp.isfinite(nstate.reward)
+          & jnp.isfinite(cost) & _all_finite(ds.link_health))
+    diverged = (~ok).astype(jnp.float32)
+    # a diverged step keeps what the learner last saw (module docstring): small selects, not the mjx.Data
+    ds = _keep(ok, ds, info["damage_state"])
+    ds = ds.replace(step_damage=_keep(ok, ds.step_damage, jax.tree.map(jnp.zeros_like, ds.step_damage)))
+    cost = jnp.where(ok, cost, 0.0)
+    task_reward = jnp.where(ok, nstate.reward, info["task_reward"])
+    success = jnp.where(ok, nstate.metrics.get("success", jnp.zeros((), jnp.float32)), 0.0)
+    obs = _keep(ok, nstate.obs, inner.obs)
     info = dict(nstate.info)
     info["damage_state"] = ds
-    cost = jnp.sum(ds.step_damage.total())
     info.update(self._summaries(ds, cost))
-    info["task_reward"] = nstate.reward
-    success = nstate.metrics.get("success", jnp.zeros((), jnp.float32))
+    info["task_reward"] = task_reward
     info["damage_episode"] = {
         "completed": jnp.maximum(episode["completed"], success),
         "cost": episode["cost"] + cost,
         "length": episode["length"] + 1.0,
         "damaged": jnp.maximum(episode["damaged"], (cost > 0).astype(jnp.float32)),
         "action_sanitised": episode["action_sanitised"] + sanitised,
+        "physics_diverged": episode["physics_diverged"] + diverged,
     }
-    reward = nstate.reward - self.weight * cost
-    done = nstate.done
+    reward = task_reward - self.weight * cost
+    done = jnp.maximum(nstate.done, diverged.astype(nstate.done.dtype))
     if self.terminate_on_destroyed:
       destroyed = jnp.any(info["entity_health"] <= 0.0)
       done = jnp.maximum(done, destroyed.astype(done.dtype))
-    metrics = dict(nstate.metrics)
+    metrics = _keep(ok, dict(nstate.metrics), jax.tree.map(jnp.zeros_like, dict(nstate.metrics)))
     metrics.update(self._metrics(info))
     metrics["action_sanitised"] = sanitised
-    return nstate.replace(obs=self._obs(nstate.obs, info), reward=reward, done=done, info=info, metrics=metrics)
+    metrics["physics_diverged"] = diverged
+    return nstate.replace(obs=self._obs(obs, info), reward=reward, done=done, info=info, metrics=metrics)
 
   # -- helpers --------------------------------------------------------------
   def _summaries(self, ds: physics.DamageState, cost):

@@ -23,7 +23,8 @@ class EpisodeStats(NamedTuple):
   entity_health: f32[B, N] final health per entity (env.entity_names order).
   cost:          f32[B] total damage (health points) over the episode.
   damaged:       f32[B] 1 if any damage occurred.
-  any_nan:       f32[B] 1 if an observation or reward was ever non-finite.
+  any_nan:       f32[B] 1 if an observation or reward was ever non-finite, or the physics
+                 diverged (``metrics["physics_diverged"]``: the damage wrapper then keeps them finite).
   damage:        {"mechanical", "thermal", "fluid"}: f32[B] health points lost to each model over the episode.
   """
 
@@ -60,7 +61,7 @@ def rollout_fn(env, policies, length: int):
     def body(carry, k):
       s, nan, dmg = carry
       s = env.step(s, policy(s, k, which))
-      bad = ~(jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward))
+      bad = ~(jnp.all(jnp.isfinite(s.obs)) & jnp.isfinite(s.reward)) | (s.metrics["physics_diverged"] > 0)
       dmg = {m: dmg[m] + s.info["damage"][m] for m in MODALITIES}
       return (s, nan | bad, dmg), s.metrics["success"]
 

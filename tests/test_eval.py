@@ -262,6 +262,9 @@ def test_metrics_follow_damage_model_definitions():
   assert m["entity_health"] == {"plate": 72.5, "robot": 99.75} and m["entity_health_min"]["plate"] == 0
   assert E.metrics(pe, ["plate", "robot"], safe_threshold=99.5)["safe_completion"] == 0.25
   assert "safe completion (SC, health > 95)  50.0 %" in E.format_table(m)
+  assert "diverged_episodes" not in m and "diverged physics" not in E.format_table(m)
+  m = E.metrics(dict(pe, physics_diverged=np.array([0.0, 2, 0, 1])), ["plate", "robot"])
+  assert m["diverged_episodes"] == 2 and re.search(r"episodes ended by diverged physics +2\n", E.format_table(m))
 
 
 def _fake_checkpoint(tmp_path, task, task_kwargs):

@@ -15,6 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from brax.envs.base import Wrapper
+
+import mjx_damage as md
 import train
 from train import multipliers as M
 from train import ppo
@@ -365,23 +368,41 @@ def test_normalizer_after_update_starts_the_ratio_at_one(env):
 
 
 class _NaNRewardPusher(PusherEnv):
-  """The pusher with a NaN reward: what an env that blows up hands the trainer."""
+  """The pusher with a NaN reward: what an env that blows up hands the damage wrapper."""
 
   def step(self, state, action):
     s = super().step(state, action)
     return s.replace(reward=s.reward * jnp.nan)
 
 
+class _NaNOutsideTheDamageWrapper(Wrapper):
+  """A NaN task reward added outside the damage wrapper, which therefore cannot keep it finite."""
+
+  def step(self, state, action):
+    s = self.env.step(state, action)
+    return s.replace(info=dict(s.info, task_reward=s.info["task_reward"] * jnp.nan))
+
+
 def test_non_finite_losses_stop_training_naming_the_seeds(tmp_path):
   """A diverged update raises (naming seeds, iteration and metric) instead of training NaN weights to the
   end of the budget, and writes no checkpoint of the NaN weights."""
   out = str(tmp_path / "run")
+  env = _NaNOutsideTheDamageWrapper(md.DamageWrapper(PusherEnv()))
   with pytest.raises(ppo.TrainingDiverged, match=r"iteration 1 .*seed 3: .*loss/.*seed 4: .*loss/.*env's own .*"
                                                   r"100 % of seed 3's transitions.*no checkpoint"):
-    train.train(_NaNRewardPusher(), seeds=SEEDS, num_timesteps=4 * ITER, checkpoint_every=ITER, out_dir=out,
-                **TINY)
+    train.train(env, seeds=SEEDS, num_timesteps=4 * ITER, checkpoint_every=ITER, out_dir=out, **TINY)
   from train import checkpoint
   assert not os.path.exists(os.path.join(out, checkpoint.FILENAME))
+
+
+def test_an_env_whose_physics_diverges_trains_on(tmp_path):
+  """Inside the damage wrapper a non-finite step ends its episode with finite data (mjx_damage.wrapper):
+  training goes on, finite, and logs how many steps diverged."""
+  res = train.train(_NaNRewardPusher(), seeds=SEEDS, num_timesteps=2 * ITER, eval_every=ITER, **TINY)
+  assert len(res.history) == 2 * len(SEEDS)
+  for r in res.history:
+    assert r["env_non_finite"] == 0.0 and r["env_diverged_steps"] == ITER  # every step: the reward is NaN
+    assert all(np.isfinite(v) for k, v in r.items() if k.startswith("loss/"))
 
 
 def test_non_finite_losses_per_seed():

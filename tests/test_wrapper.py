@@ -209,3 +209,57 @@ def test_wrapper_rejects_bad_action_bounds():
   for bounds in ((1.0, -1.0), (0.0, 0.0), (-1.0, float("inf")), (float("nan"), 1.0), (-1.0,), "ab", (True, 2.0)):
     with pytest.raises(ValueError, match="action_bounds: must be two finite numbers"):
       md.DamageWrapper(DropEnv(), action_bounds=bounds)
+
+
+class DivergingDrop(PushedDrop):
+  """PushedDrop whose physics diverges (NaN velocity) on a step whose first action entry is 1."""
+
+  def step(self, state, action):
+    v = self.mj_model.jnt_dofadr[self.mj_model.joint("plate").id]
+    d = state.pipeline_state
+    d = d.replace(qvel=jnp.where(action[0] >= 1.0, d.qvel.at[v].set(jnp.nan), d.qvel))
+    return super().step(state.replace(pipeline_state=d), action)
+
+
+@pytest.fixture(scope="module")
+def diverging():
+  env = md.DamageWrapper(DivergingDrop(min_height=0.1, max_height=0.3), weight=2.0, health_in_obs=True)
+  return env, jax.jit(env.reset), jax.jit(env.step)
+
+
+def test_diverged_physics_ends_the_episode_with_finite_outputs(diverging):
+  env, reset, step = diverging
+  s = reset(jax.random.PRNGKey(0))
+  for _ in range(12):  # the plate lands: health below 100, the task reward non-zero
+    s = step(s, jnp.zeros(3))
+  before = s
+  assert float(before.info["entity_health"][0]) < 100.0 and not float(before.done)
+  s = step(before, jnp.array([1.0, 0.0, 0.0]))
+  assert np.isnan(np.asarray(s.pipeline_state.qvel)).any()  # the physics is left as MJX returned it
+  assert float(s.done) == 1.0 and float(s.metrics["physics_diverged"]) == 1.0
+  assert float(s.info["damage_episode"]["physics_diverged"]) == 1.0
+  np.testing.assert_array_equal(s.obs, before.obs)  # what the learner last saw
+  np.testing.assert_array_equal(s.info["link_health"], before.info["link_health"])
+  assert float(s.info["cost"]) == 0.0 and all(float(v) == 0.0 for v in s.info["damage"].values())
+  assert float(s.reward) == float(before.info["task_reward"]) == float(s.info["task_reward"])
+  assert float(s.info["damage_episode"]["cost"]) == float(before.info["damage_episode"]["cost"])
+  for k, v in s.metrics.items():
+    assert np.isfinite(np.asarray(v)).all(), k
+  assert float(before.metrics["physics_diverged"]) == 0.0
+
+
+def test_diverged_env_is_reset_by_brax_and_others_continue():
+  env = md.DamageWrapper(DivergingDrop(min_height=0.1, max_height=0.3))
+  wrapped = bw.wrap(env, episode_length=20, action_repeat=1)
+  reset, step = jax.jit(wrapped.reset), jax.jit(wrapped.step)
+  s = reset(jax.random.split(jax.random.PRNGKey(2), 3))
+  s = step(s, jnp.zeros((3, 3)))
+  s = step(s, jnp.array([[1.0, 0, 0], [0, 0, 0], [0, 0, 0]]))
+  np.testing.assert_array_equal(s.done, [1, 0, 0])
+  np.testing.assert_array_equal(s.metrics["physics_diverged"], [1, 0, 0])
+  assert np.isfinite(np.asarray(s.pipeline_state.qvel)).all()  # AutoResetWrapper restored env 0
+  s = step(s, jnp.zeros((3, 3)))  # env 0 starts a new episode; nothing non-finite anywhere
+  np.testing.assert_array_equal(s.info["damage_episode"]["length"], [1, 3, 3])
+  np.testing.assert_array_equal(s.info["damage_episode"]["physics_diverged"], 0.0)
+  for leaf in jax.tree.leaves((s.obs, s.reward, s.info["entity_health"], s.pipeline_state.qpos)):
+    assert np.isfinite(np.asarray(leaf)).all()

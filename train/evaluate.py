@@ -147,6 +147,7 @@ def summary(state) -> dict:
       "length": ep["length"],
       "entity_health": state.info["entity_health"],
       "success_final": state.metrics.get("success", ep["completed"] * 0.0),
+      "physics_diverged": ep.get("physics_diverged", ep["completed"] * 0.0),
   }
 
 
@@ -345,6 +346,8 @@ def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: floa
   }
   if "task_return" in per_episode:
     out["task_return"] = float(np.mean(per_episode["task_return"], dtype=np.float64))
+  if "physics_diverged" in per_episode:  # episodes the damage wrapper ended on a non-finite physics step
+    out["diverged_episodes"] = int(np.sum(np.asarray(per_episode["physics_diverged"]) > 0))
   return out
 
 
@@ -463,6 +466,8 @@ def format_table(m: dict, title: str = "") -> str:
   ]
   rows += [(f"episode cost {k}", f"{v:.3f}") for k, v in m["cost_percentiles"].items()]
   rows += [("mean episode length (steps)", f"{m['mean_length']:.1f}")]
+  if m.get("diverged_episodes"):  # only when the physics diverged: ended early, not completed
+    rows += [("episodes ended by diverged physics", f"{m['diverged_episodes']}")]
   rows += [(f"final health: {n} (mean / min)", f"{v:.2f} / {m['entity_health_min'][n]:.2f}")
            for n, v in m["entity_health"].items()]
   w = max(len(r[0]) for r in rows)

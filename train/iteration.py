@@ -195,6 +195,7 @@ class Trainer:
         "episodes": jnp.sum(done), "return": jnp.sum(done * ret), "cost": jnp.sum(done * c),
         "completion": jnp.sum(done * completed), "safe_completion": jnp.sum(done * safe),
         "health": jnp.sum(done * jnp.mean(health, axis=-1)),
+        "diverged": jnp.sum(nstate.metrics.get("physics_diverged", jnp.zeros_like(done))),
     }
     acc = jax.tree.map(lambda x: jnp.where(done > 0, 0.0, x), EpisodeAcc(ret, c, completed))
     transition = types.Transition(
@@ -327,6 +328,8 @@ class Trainer:
       finite &= jnp.all(jnp.isfinite(leaf).reshape(leaf.shape[:2] + (-1,)), axis=-1)
     metrics.update(step_reward=self._pmean(jnp.mean(shaped)), step_cost=self._pmean(jnp.mean(cost)),
                    env_non_finite=self._pmean(1.0 - jnp.mean(finite.astype(jnp.float32))),
+                   # steps the damage wrapper ended because the physics diverged (it keeps their data finite)
+                   env_diverged_steps=ended["diverged"],
                    lagrange=mult.lam, damage_weight=w, budget=M.effective_budget(mult, ts.multiplier_params),
                    cost_estimate=cost_estimate)
     return ts, metrics
