@@ -2,7 +2,8 @@
 
 For each task of ``tasks.names()``: ``--envs`` environments under the training
 stack (``tasks.make(name)`` → Brax's EpisodeWrapper(task episode length) →
-VmapWrapper → AutoResetWrapper) take uniform random actions in [−1, 1], of
+VmapWrapper → AutoResetWrapper) take uniform random actions in [−1, 1] (or,
+with ``--scripted-noise σ``, the safe script's plus N(0, σ²) noise), of
 which a share ``--extreme-frac`` of the entries is replaced by one of
 ±1e3, NaN, ±inf. Steps run in compiled ``lax.scan`` chunks of ``--chunk``
 steps; every check is a counter in the scan carry (no host round trip per
@@ -27,6 +28,8 @@ Usage::
     .venv/bin/python benchmarks/soak.py --workers 6 --envs 2048   # GPU: 1e6 steps per task, 6 processes
     .venv/bin/python benchmarks/soak.py --robot panda --workers 6 --envs 2048   # every task the Panda runs
     nice -n 10 .venv/bin/python benchmarks/soak.py                # CPU: 8 envs × 400 steps per task
+    .venv/bin/python benchmarks/soak.py --tasks shelve_item --scripted-noise 0.5 --envs 256 --steps 256000 \
+        --out benchmarks/results/soak_shelve_item_scripted_noise_cpu.json   # near the safe script's path
 
 ``--workers``: the tasks are dealt to that many processes, which share the device. On one H100,
 2048 envs × 500 steps per task ran all 22 tasks in 316 s with 6 workers; a first attempt at 512
@@ -88,8 +91,14 @@ def liquid_floor(env) -> float:
   return float(min(d.geom_xpos[g][2] for g in planes)) - 2.0 * lm.radius
 
 
-def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int | None = None):
+def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int | None = None,
+          scripted_noise: float | None = None):
   """``(reset(key) -> carry, run(carry) -> carry)``: one compiled chunk of ``chunk`` steps of ``envs`` envs.
+
+  ``scripted_noise``: None for uniform random actions; σ ≥ 0 for the task's safe script plus
+  Gaussian noise N(0, σ²) on every action entry (clipped to [−1, 1]), which keeps the envs near the
+  states a learner cloned from demonstrations visits (carrying, lifting, placing) instead of the
+  counter-top flailing of uniform actions. Extreme entries are injected on top as before.
 
   ``env``: a damage-wrapped env (:func:`tasks.make`); ``episode_length``
   (default: the task's) is where Brax's EpisodeWrapper truncates. The carry holds the batched state, the previous step's link health f32[E, L]
@@ -104,6 +113,7 @@ def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int |
   floor = liquid_floor(env) if lm is not None else 0.0
   A = env.action_size
   extremes = jnp.asarray(EXTREMES, jnp.float32)
+  script = None if scripted_noise is None else jax.vmap(tasks.scripted_policy(env, "safe"))
 
   def reset(key):
     k0, key = jax.random.split(key)
@@ -115,7 +125,12 @@ def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int |
   def one_step(carry, _):
     s, prev_h, prev_done, key, c = carry
     key, ku, ke, kv = jax.random.split(key, 4)
-    a = jax.random.uniform(ku, (envs, A), minval=-1.0, maxval=1.0)
+    if script is None:
+      a = jax.random.uniform(ku, (envs, A), minval=-1.0, maxval=1.0)
+    else:
+      ks, kn = jax.random.split(ku)
+      a = jnp.clip(script(s, jax.random.split(ks, envs)) + scripted_noise * jax.random.normal(kn, (envs, A)),
+                   -1.0, 1.0)
     extreme = jax.random.uniform(ke, (envs, A)) < extreme_frac
     a = jnp.where(extreme, extremes[jax.random.randint(kv, (envs, A), 0, len(EXTREMES))], a)
     s = stack.step(s, a)
@@ -163,10 +178,10 @@ def build(env, envs: int, chunk: int, extreme_frac: float, episode_length: int |
 
 
 def soak_task(name: str, envs: int, steps: int, chunk: int, extreme_frac: float, seed: int = 0,
-              robot: str = ROBOT) -> dict:
+              robot: str = ROBOT, scripted_noise: float | None = None) -> dict:
   """Soak one task with ``robot``: ``steps`` env steps per env (rounded up to whole chunks). Counts as plain ints."""
   env = tasks.make(name, robot=robot)
-  reset, run = build(env, envs, chunk, extreme_frac)
+  reset, run = build(env, envs, chunk, extreme_frac, scripted_noise=scripted_noise)
   t0 = time.perf_counter()
   carry = reset(jax.random.PRNGKey(seed))
   carry = run(carry)
@@ -192,7 +207,8 @@ def failures(row: dict) -> int:
 def report_md(res: dict) -> str:
   lines = [f"# Soak: random and extreme actions through every task ({res['device']})", "",
            f"Command: `{res['command']}`  ", f"Date: {res['date']}; total {res['total_s']} s", "",
-           f"Robot: {res.get('robot', ROBOT)}. {res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions uniform in [−1, 1] with "
+           f"Robot: {res.get('robot', ROBOT)}. {res['envs']} envs per task under Episode → Vmap → AutoReset wrappers; actions "
+           f"{res.get('actions', 'uniform').replace('uniform', 'uniform in [−1, 1]')}, with "
            f"{100 * res['extreme_frac']:g} % of entries replaced by one of ±1e3, NaN, ±inf. Every (env, step) is "
            "checked on device (benchmarks/soak.py docstring defines the counters).", "",
            "| task | steps | episodes | non-finite | health out of [0, 100] | health increases | particles | "
@@ -227,6 +243,8 @@ def main(argv=None) -> int:
   p.add_argument("--chunk", type=int, default=None, help="steps per compiled scan (default 250 GPU, 200 CPU)")
   p.add_argument("--extreme-frac", type=float, default=0.05, help="share of action entries made extreme")
   p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--scripted-noise", type=float, default=None, metavar="SIGMA",
+                 help="actions: the task's safe script + N(0, SIGMA²) per entry, clipped (default: uniform random)")
   p.add_argument("--out", default=None, help="JSON path (default benchmarks/results/soak_<platform>.json)")
   p.add_argument("--workers", type=int, default=1,
                  help="soak the tasks in this many parallel processes (tasks dealt round-robin; on a GPU each "
@@ -257,6 +275,8 @@ def main(argv=None) -> int:
     p.error(f"--extreme-frac: must be in [0, 1], got {args.extreme_frac}")
   if args.workers < 1:
     p.error(f"--workers: must be >= 1, got {args.workers}")
+  if args.scripted_noise is not None and not 0.0 <= args.scripted_noise < float("inf"):  # also refuses NaN
+    p.error(f"--scripted-noise: must be a finite number >= 0, got {args.scripted_noise}")
   per_env = -(-steps // args.envs)
   dev = jax.devices()[0]
   out = args.out or default_out(dev.platform, args.robot)
@@ -266,7 +286,7 @@ def main(argv=None) -> int:
   rows = []
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py", *(sys.argv[1:] if argv is None else argv)])
   for name in names:
-    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed, args.robot)
+    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed, args.robot, args.scripted_noise)
     rows.append(r)
     bad = {k: r[k] for k in COUNTERS if r[k]}
     print(f"{name}: {r['steps']} steps, {r['episodes']} episodes, failures {failures(r)}{' ' + str(bad) if bad else ''}, "
@@ -277,6 +297,7 @@ def main(argv=None) -> int:
         "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')}", "host": platform.node(),
         "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "total_s": round(time.perf_counter() - t0, 1),
         "envs": args.envs, "steps_per_task": per_env * args.envs, "chunk": chunk, "extreme_frac": args.extreme_frac,
+        "actions": ("uniform" if args.scripted_noise is None else f"safe script + N(0, {args.scripted_noise:g}²)"),
         "seed": args.seed, "robot": args.robot, "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
         "tasks": rows, "missing": names[len(rows):], "complete": len(rows) == len(names),
         "ok": len(rows) == len(names) and all(failures(r) == 0 for r in rows),

@@ -85,6 +85,14 @@ def test_soak_every_task(name):
     assert r["particles"] > 0
 
 
+@pytest.mark.slow
+def test_soak_with_the_safe_script_and_noise():
+  """``--scripted-noise``: the safe script's actions plus Gaussian noise, clipped into [−1, 1], so none is
+  sanitised; nothing breaks an invariant."""
+  r = soak.soak_task("place_plate", envs=2, steps=40, chunk=20, extreme_frac=0.0, scripted_noise=0.3)
+  assert r["steps"] == 80 and soak.failures(r) == 0 and r["action_sanitised"] == r["extreme_injected"] == 0, r
+
+
 def test_worker_argv_drops_only_the_per_worker_flags():
   argv = ["--robot", "panda", "--workers", "4", "--tasks=a,b", "--envs", "16", "--out", "x.json", "--seed=3"]
   assert soak.worker_argv(argv) == ["--robot", "panda", "--envs", "16", "--seed=3"]
@@ -93,7 +101,9 @@ def test_worker_argv_drops_only_the_per_worker_flags():
 @pytest.mark.parametrize("argv,field", [(["--robot", "ur5"], "--robot"), (["--workers", "0"], "--workers"),
                                         (["--robot", "gripper", "--tasks", "nope"], "--tasks"),
                                         (["--robot", "panda_wrist", "--tasks", "navigate_and_pick"], "--tasks"),
-                                        (["--tasks", ","], "--tasks")])
+                                        (["--tasks", ","], "--tasks"),
+                                        (["--scripted-noise", "-0.1"], "--scripted-noise"),
+                                        (["--scripted-noise", "nan"], "--scripted-noise")])
 def test_soak_cli_names_the_bad_field(argv, field, capsys):
   with pytest.raises(SystemExit) as e:
     soak.main(argv)
