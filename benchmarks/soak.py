@@ -29,7 +29,7 @@ Usage::
     .venv/bin/python benchmarks/soak.py --robot panda --workers 6 --envs 2048   # every task the Panda runs
     nice -n 10 .venv/bin/python benchmarks/soak.py                # CPU: 8 envs × 400 steps per task
     .venv/bin/python benchmarks/soak.py --tasks shelve_item --scripted-noise 0.5 --envs 256 --steps 256000 \
-        --out benchmarks/results/soak_shelve_item_scripted_noise_cpu.json   # near the safe script's path
+        --chunk 100 --out benchmarks/results/soak_shelve_item_scripted_noise_cpu.json   # near the safe script's path
 
 ``--workers``: the tasks are dealt to that many processes, which share the device. On one H100,
 2048 envs × 500 steps per task ran all 22 tasks in 316 s with 6 workers; a first attempt at 512
