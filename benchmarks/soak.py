@@ -286,7 +286,8 @@ def main(argv=None) -> int:
   rows = []
   command = " ".join(shlex.quote(a) for a in ["python", "benchmarks/soak.py", *(sys.argv[1:] if argv is None else argv)])
   for name in names:
-    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed, args.robot, args.scripted_noise)
+    r = soak_task(name, args.envs, per_env, chunk, args.extreme_frac, args.seed, args.robot,
+                  scripted_noise=args.scripted_noise)
     rows.append(r)
     bad = {k: r[k] for k in COUNTERS if r[k]}
     print(f"{name}: {r['steps']} steps, {r['episodes']} episodes, failures {failures(r)}{' ' + str(bad) if bad else ''}, "

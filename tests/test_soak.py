@@ -118,7 +118,7 @@ def test_soak_keeps_the_gripper_and_its_file_names(monkeypatch):
   class Stop(Exception):
     pass
 
-  def stop(name, *a):
+  def stop(name, *a, **kw):
     raise Stop(a[-1])
 
   monkeypatch.setattr(soak, "soak_task", stop)
