@@ -254,8 +254,7 @@ def main(argv=None) -> int:
     if robot is not None:
       if ":" in task:
         raise ValueError(f"--robot: only for a registered --task, not the env class {task!r}")
-      if robot not in tasks.robots_for(task):
-        raise ValueError(f"--robot: task {task!r} runs {', '.join(tasks.robots_for(task))}, got {robot!r}")
+      tasks.check_robot(robot, [task], "--robot")
       if task_kwargs.get("robot", robot) != robot:
         raise ValueError(f"--robot: {robot!r} disagrees with --task-arg robot={task_kwargs['robot']!r}")
       task_kwargs["robot"] = robot

@@ -9,6 +9,7 @@ import numpy as np
 from brax.envs.base import Env, Wrapper
 
 import mjx_damage  # noqa: F401  (installs the jax compat shim brax needs)
+import tasks as task_registry
 from mjx_damage.wrapper import DamageWrapper
 
 
@@ -25,8 +26,6 @@ def recorded_task_kwargs(task, env: Env, task_kwargs: Optional[dict]) -> dict:
   """``task_kwargs`` to store with a checkpoint: a registry task's with its robot named
   (``tasks.recorded_kwargs``), so the checkpoint does not depend on the default robot; others unchanged."""
   if isinstance(task, str) and ":" not in task:
-    import tasks as task_registry
-
     return task_registry.recorded_kwargs(env, task_kwargs)
   return dict(task_kwargs or {})
 
@@ -51,10 +50,6 @@ def resolve_task(task, task_kwargs: Optional[dict] = None) -> tuple[Env, str]:
       raise ValueError(f"task: cannot import env class {task!r} ({e})") from e
     name = task
   elif isinstance(task, str):
-    try:
-      import tasks as task_registry
-    except ImportError as e:  # the registry is a sibling package of this repo
-      raise ValueError(f"task: cannot look up {task!r}: the task registry failed to import ({e})") from e
     names = list(task_registry.names())
     if task not in names:
       raise ValueError(f"task: unknown task {task!r}; registered: {', '.join(names) or '(none)'}")

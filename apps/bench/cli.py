@@ -252,13 +252,9 @@ def main(argv=None) -> int:
   try:
     args.task_kwargs = {} if args.robot is None else {"robot": args.robot}
     if args.robot is not None:
-      if args.robot not in tasks.robots.names():
-        raise ValueError(f"--robot: unknown robot {args.robot!r} (valid: {', '.join(tasks.robots.names())})")
+      tasks.check_robot(args.robot, [args.task], "--robot")
       if args.task not in tasks.names():
         raise ValueError(f"--robot: only with a registry --task, got --task {args.task!r}")
-      if args.robot not in tasks.robots_for(args.task):
-        raise ValueError(f"--robot: task {args.task!r} runs {', '.join(tasks.robots_for(args.task))} only, "
-                         f"not {args.robot!r}")
     if R.check_backend(args.backend) == "auto":  # the task's pick; nothing to pick without a task
       args.backend = (R.pick_backend("auto", R.make_task(args.task, **args.task_kwargs)) if args.task in tasks.names()
                       else "mjx")
