@@ -24,6 +24,10 @@ at the middle of its range), the policy a damage-aware learner falls back to
 when every move it tries costs damage; its row against ``safe`` shows whether
 keeping still or the safe strategy earns more, with and without the damage
 penalty.
+``TASK:STYLE+noise=SIGMA`` runs a style with N(0, SIGMA²) added to every action
+entry (clipped): the scripted strategy as a Gaussian learner's exploration
+perturbs it, e.g. whether the careful route still avoids damage at a policy's
+initial standard deviation.
 
 Writes ``benchmarks/results/reward_preference[_TAG].{json,md}`` with the command. ``--robot`` (default the
 gripper, the committed results' robot) is every task's robot; another robot writes
@@ -62,12 +66,46 @@ WINDOW = 10  # steps per window of the reward-trace summary
 
 
 STILL = "still"  # the zero action at every step
+NOISE = "+noise="  # STYLE+noise=SIGMA: the scripted style with N(0, SIGMA²) added to every action entry
 
 
 def still_policy(env):
   """``policy(state, rng) -> f32[A]``: the zero action (hand held, gripper at mid-range)."""
   size = env.action_size
   return lambda state, rng: jnp.zeros((size,), jnp.float32)
+
+
+def parse_style(style: str) -> tuple[str, float]:
+  """``"safe+noise=0.3"`` -> ``("safe", 0.3)``; a style without the suffix has noise 0."""
+  base, sep, sigma = style.partition(NOISE)
+  if not sep:
+    return style, 0.0
+  try:
+    value = float(sigma)
+  except ValueError:
+    value = float("nan")
+  if not base or not np.isfinite(value) or value < 0:
+    raise ValueError(f"style: STYLE{NOISE}SIGMA needs a style and a finite SIGMA >= 0, got {style!r}")
+  return base, value
+
+
+def noisy_policy(policy, sigma: float):
+  """``policy`` with N(0, sigma²) added to each action entry, clipped to [-1, 1]: what a Gaussian learner's
+  exploration does to a scripted strategy (a policy's initial std: exp(init log-std), e.g. 0.61 for -0.5)."""
+  if sigma == 0.0:
+    return policy
+
+  def act(state, rng):
+    k_policy, k_noise = jax.random.split(rng)
+    a = policy(state, k_policy)
+    return jnp.clip(a + sigma * jax.random.normal(k_noise, a.shape, a.dtype), -1.0, 1.0)
+
+  return act
+
+
+def make_policy(env, style: str):
+  base, sigma = parse_style(style)
+  return noisy_policy(still_policy(env) if base == STILL else env.unwrapped.policy(base), sigma)
 
 
 def trace_fn(env, policies, length: int):
@@ -131,7 +169,7 @@ def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dic
   env = tasks.make(name, robot=robot, **overrides)
   task = env.unwrapped
   length = task.episode_length
-  policies = [still_policy(env) if s == STILL else task.policy(s) for s in styles]
+  policies = [make_policy(env, s) for s in styles]
   run = trace_fn(env, policies, length)
   rngs = jax.random.split(jax.random.PRNGKey(seed), episodes)  # the same episodes for every policy
   t0 = time.time()
@@ -263,8 +301,9 @@ def parse_args(argv=None):
   p.add_argument("--damage-weight", type=float, default=2.0,
                  help="w of the damage-aware return also reported (task − w·cost; the paper's w = 2)")
   p.add_argument("--style", action="append", default=[],
-                 help="TASK:STYLE, an extra scripted style of a task, or TASK:still (the zero action; "
-                      "repeatable)")
+                 help="TASK:STYLE, an extra scripted style of a task, or TASK:still (the zero action), each "
+                      "optionally with +noise=SIGMA (N(0, SIGMA²) added to every action entry, e.g. "
+                      "shelve_item:safe+noise=0.3; repeatable)")
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="task keyword arguments over each task's RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; the results record them")
@@ -300,6 +339,7 @@ def parse_args(argv=None):
     t, _, style = s.partition(":")
     if t not in a.task_list or not style:
       raise ValueError(f"style: expected TASK:STYLE with TASK in {a.task_list}, got {s!r}")
+    parse_style(style)  # a bad noise suffix is refused here, before anything compiles
     a.extra.setdefault(t, []).append(style)
   return a
 

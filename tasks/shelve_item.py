@@ -90,6 +90,10 @@ UNSAFE_BOTTOM = SHELF_TOP + 0.02  # m, lowest box-bottom height of the unsafe pu
 PUSH_PAST = 0.03  # m, the unsafe push carries the box this far past the slot until the glass has gone off the back
 # box centre relative to (0, slot y, box bottom height): in front of the shelf, bottom 2-10 cm above the shelf top
 IN_HAND_LO, IN_HAND_HI = (-0.06, -0.05, SHELF_TOP + 0.02), (0.02, 0.05, SHELF_TOP + 0.10)
+# start="above_glass": the same box-centre x and y, box bottom 3-7 cm above the glass's top (the safe carry's height
+# and up to 4 cm above it): the climb is done, and what is left to decide is where to come down
+ABOVE_GLASS_LO, ABOVE_GLASS_HI = (-0.06, -0.05, GLASS_TOP + 0.03), (0.02, 0.05, GLASS_TOP + 0.07)
+STARTS = {"in_front": (IN_HAND_LO, IN_HAND_HI), "above_glass": (ABOVE_GLASS_LO, ABOVE_GLASS_HI)}
 HAND_SPEED = 0.4  # m/s, default hand speed limit with the box in hand (the robot alone: ≈ 0.83 m/s)
 # Half width (y, across the fingers) of the box per robot: the Panda's pads open to 8 cm, so it gets
 # a 6 cm-wide box (a narrower carton of the same height and depth); other robots the 10 cm one.
@@ -126,7 +130,10 @@ class ShelveItem(Task):
   success_condition = "box upright on the shelf within 3 cm of the slot, gripper open"
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
-               success_bonus=1.0, hand_speed=HAND_SPEED):
+               success_bonus=1.0, hand_speed=HAND_SPEED, start="in_front"):
+    if start not in STARTS:
+      raise ValueError(f"start: unknown {start!r}; valid: {', '.join(STARTS)}")
+    self.start = start
     if isinstance(hand_speed, bool) or not isinstance(hand_speed, (int, float)) or not 0.0 <= hand_speed < 10.0:
       raise ValueError(f"hand_speed: must be a number in [0, 10) m/s (0: the robot's own limit), got {hand_speed!r}")
     self.hand_speed = float(hand_speed)
@@ -162,7 +169,7 @@ class ShelveItem(Task):
     k = jax.random.split(rng, 3)
     ys = jax.random.uniform(k[0], (), minval=-0.05, maxval=0.05)
     # the box in hand in front of the shelf, somewhat above the shelf top, roughly in line with the slot
-    lo, hi = jnp.array(IN_HAND_LO), jnp.array(IN_HAND_HI)
+    lo, hi = (jnp.array(v) for v in STARTS[self.start])
     box = jax.random.uniform(k[1], (3,), minval=lo, maxval=hi) + jnp.stack([0.0, ys, BOX_HALF[2]])
     glass_dy = jax.random.uniform(k[2], (), minval=-0.01, maxval=0.01)
     # fingers on the box's sides; reset() servos them to the squeezing grip the policies carry with

@@ -144,3 +144,18 @@ def test_merge_refuses_unreadable_files_and_mixed_tasks(tmp_path):
       json.dump({"task": task, "device": "cpu", "rows": []}, f)
   with pytest.raises(ValueError, match="merge: files of one task only"):
     R.parse_args(["--merge", *paths])
+
+
+def test_reward_preference_noisy_style_adds_gaussian_noise_to_the_scripted_action():
+  P = load_benchmark("reward_preference")
+  a = P.parse_args(["--tasks", "shelve_item", "--style", "shelve_item:safe+noise=0.3"])
+  assert a.extra == {"shelve_item": ["safe+noise=0.3"]}
+  assert P.parse_style("safe+noise=0.3") == ("safe", 0.3) and P.parse_style("still") == ("still", 0.0)
+  for bad in ("safe+noise=-1", "safe+noise=nan", "safe+noise=x", "+noise=0.1"):
+    with pytest.raises(ValueError, match="style"):
+      P.parse_args(["--tasks", "shelve_item", "--style", f"shelve_item:{bad}"])
+  base = lambda state, rng: jnp.full((4,), 0.5)
+  assert P.noisy_policy(base, 0.0) is base
+  acts = jax.vmap(lambda k: P.noisy_policy(base, 0.3)(None, k))(jax.random.split(jax.random.PRNGKey(0), 4096))
+  assert float(jnp.max(acts)) <= 1.0 and float(jnp.min(acts)) >= -1.0
+  assert abs(float(jnp.mean(acts)) - 0.5) < 0.02 and abs(float(jnp.std(acts)) - 0.3) < 0.02
