@@ -25,7 +25,9 @@ Initial state (per episode): slot y_s ∈ [−0.05, 0.05] m (the glass and bottl
 move with it; the glass ± 1 cm); the box in hand, gripped across its 10 cm
 width 1.5 cm above its centre, centre x ∈ [−0.06, 0.02] m, y ∈ y_s ± 0.05 m,
 bottom 2–10 cm above the shelf top (0.12–0.20 m): in front of the shelf,
-roughly in line with the slot, below the glass's top (0.24 m).
+roughly in line with the slot, below the glass's top (0.24 m). ``start="above_glass"``
+(default ``"in_front"``): the same x and y, bottom 3–7 cm over the glass's top (0.27–0.31 m), the
+careful route's climb already done (docs/rl_task_design.md, "Shelve Item from above the glass").
 
 Success (per step): the cereal box rests upright on the shelf (bottom within
 3 mm of the shelf top, speed < 5 cm/s) with its centre within 3 cm (xy) of the
