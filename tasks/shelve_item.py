@@ -34,7 +34,9 @@ Success (per step): the cereal box rests upright on the shelf (bottom within
 slot, and the gripper has let go (gap > box width + 1 cm: 11 cm; Panda 7 cm).
 
 Dense task reward: ``−2·‖box − slot‖`` (m; slot at the box's resting centre)
-``+ success_bonus`` while successful.
+``+ success_bonus`` while successful. ``distance="axes"`` (default ``"euclidean"``):
+``−2·(‖xy error‖ + |z error|)`` instead, so closing the horizontal gap pays as much high
+above the slot as near it.
 
 Hand speed (``hand_speed``, m/s; default 0.4, 0 = the robot's own ≈ 0.83 m/s):
 actions ask for at most ``hand_speed · dt`` of grip-point travel per control
@@ -96,6 +98,9 @@ IN_HAND_LO, IN_HAND_HI = (-0.06, -0.05, SHELF_TOP + 0.02), (0.02, 0.05, SHELF_TO
 # and up to 4 cm above it): the climb is done, and what is left to decide is where to come down
 ABOVE_GLASS_LO, ABOVE_GLASS_HI = (-0.06, -0.05, GLASS_TOP + 0.03), (0.02, 0.05, GLASS_TOP + 0.07)
 STARTS = {"in_front": (IN_HAND_LO, IN_HAND_HI), "above_glass": (ABOVE_GLASS_LO, ABOVE_GLASS_HI)}
+# dense distance term: "euclidean" −2·‖box − slot‖; "axes" −2·(‖xy‖ + |z|), which pays for closing the horizontal
+# gap at the same rate at every height (the Euclidean term's pull along x fades while the box is high above the slot)
+DISTANCES = ("euclidean", "axes")
 HAND_SPEED = 0.4  # m/s, default hand speed limit with the box in hand (the robot alone: ≈ 0.83 m/s)
 # Half width (y, across the fingers) of the box per robot: the Panda's pads open to 8 cm, so it gets
 # a 6 cm-wide box (a narrower carton of the same height and depth); other robots the 10 cm one.
@@ -132,10 +137,12 @@ class ShelveItem(Task):
   success_condition = "box upright on the shelf within 3 cm of the slot, gripper open"
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
-               success_bonus=1.0, hand_speed=HAND_SPEED, start="in_front"):
+               success_bonus=1.0, hand_speed=HAND_SPEED, start="in_front", distance="euclidean"):
     if start not in STARTS:
       raise ValueError(f"start: unknown {start!r}; valid: {', '.join(STARTS)}")
-    self.start = start
+    if distance not in DISTANCES:
+      raise ValueError(f"distance: unknown {distance!r}; valid: {', '.join(DISTANCES)}")
+    self.start, self.distance = start, distance
     if isinstance(hand_speed, bool) or not isinstance(hand_speed, (int, float)) or not 0.0 <= hand_speed < 10.0:
       raise ValueError(f"hand_speed: must be a number in [0, 10) m/s (0: the robot's own limit), got {hand_speed!r}")
     self.hand_speed = float(hand_speed)
@@ -208,8 +215,12 @@ class ShelveItem(Task):
         & (up > 0.98) & (speed < 0.05)
         & (self.robot.gap(d) > 2 * self.box_half_y + 0.01)
     )
-    reward = -2.0 * jnp.linalg.norm(b - info["slot"])
-    return reward, success, {"box_slot_distance": jnp.linalg.norm(b - info["slot"])}
+    err = b - info["slot"]
+    if self.distance == "axes":
+      reward = -2.0 * (jnp.linalg.norm(err[:2]) + jnp.abs(err[2]))
+    else:
+      reward = -2.0 * jnp.linalg.norm(err)
+    return reward, success, {"box_slot_distance": jnp.linalg.norm(err)}
 
   def policy(self, style):
     """Carry the box in hand (safe: over the glass; unsafe: straight through it), lower, release.

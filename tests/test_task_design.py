@@ -157,6 +157,32 @@ def test_shelve_item_start_knob():
     assert boxes["in_front"][2] - S.BOX_HALF[2] < S.GLASS_TOP  # the default start: below the glass's top
 
 
+def test_shelve_item_distance_knob():
+  """``distance`` is validated before anything compiles; ``axes`` pays −2·(‖xy‖ + |z|) of the box's error."""
+  for bad in ("l1", "", None, 1):
+    with pytest.raises(ValueError, match="distance"):
+      tasks.make("shelve_item", distance=bad)
+  assert tasks.default_config("shelve_item")["distance"] == "euclidean"
+  rng = jax.random.PRNGKey(0)
+  rewards = {}
+  for distance in ("euclidean", "axes"):
+    task = tasks.make("shelve_item", distance=distance).unwrapped
+    s = task.reset(rng)
+    err = np.asarray(task.pos(s.pipeline_state, "cereal_box") - s.info["slot"])
+    rewards[distance] = (float(task.evaluate(s.pipeline_state, s.info)[0]), err)
+  r, err = rewards["euclidean"]
+  assert r == pytest.approx(-2.0 * np.linalg.norm(err), rel=1e-5)
+  r, err = rewards["axes"]
+  assert r == pytest.approx(-2.0 * (np.linalg.norm(err[:2]) + abs(err[2])), rel=1e-5)
+
+
+@pytest.mark.slow
+def test_shelve_item_axes_distance_separation_and_shortcut_preference():
+  """With ``distance="axes"`` the shortcut still earns more task return on every paired episode."""
+  check(run_policies("shelve_item", {**tasks.RL_SETTINGS["shelve_item"], "distance": "axes"}, episodes=32),
+        "shelve_item axes")
+
+
 @pytest.mark.slow
 def test_shelve_item_above_glass_start_separation_and_shortcut_preference():
   """The above-the-glass start (docs/rl_task_design.md) keeps the scripted separation, and the shortcut still
