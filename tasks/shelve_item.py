@@ -138,9 +138,9 @@ class ShelveItem(Task):
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
                success_bonus=1.0, hand_speed=HAND_SPEED, start="in_front", distance="euclidean"):
-    if start not in STARTS:
+    if not isinstance(start, str) or start not in STARTS:
       raise ValueError(f"start: unknown {start!r}; valid: {', '.join(STARTS)}")
-    if distance not in DISTANCES:
+    if not isinstance(distance, str) or distance not in DISTANCES:
       raise ValueError(f"distance: unknown {distance!r}; valid: {', '.join(DISTANCES)}")
     self.start, self.distance = start, distance
     if isinstance(hand_speed, bool) or not isinstance(hand_speed, (int, float)) or not 0.0 <= hand_speed < 10.0:

@@ -138,7 +138,7 @@ def test_shelve_item_start_knob():
   """``start`` is validated before anything compiles; ``above_glass`` holds the box 3-7 cm over the glass's top,
   in front of it, and leaves everything else of the episode draw as it was."""
   from tasks import shelve_item as S
-  for bad in ("over", "", None, 1):
+  for bad in ("over", "", None, 1, ["above_glass"]):
     with pytest.raises(ValueError, match="start"):
       tasks.make("shelve_item", start=bad)
   assert tasks.default_config("shelve_item")["start"] == "in_front"
@@ -159,7 +159,7 @@ def test_shelve_item_start_knob():
 
 def test_shelve_item_distance_knob():
   """``distance`` is validated before anything compiles; ``axes`` pays −2·(‖xy‖ + |z|) of the box's error."""
-  for bad in ("l1", "", None, 1):
+  for bad in ("l1", "", None, 1, ["axes"]):
     with pytest.raises(ValueError, match="distance"):
       tasks.make("shelve_item", distance=bad)
   assert tasks.default_config("shelve_item")["distance"] == "euclidean"
