@@ -1,6 +1,6 @@
 """The interface between physics backends and the damage models.
 
-A backend (:mod:`mjx_damage.backends`: MJX-JAX, native MuJoCo; MuJoCo Warp later)
+A backend (:mod:`mjx_damage.backends`: MJX-JAX, MuJoCo Warp, native MuJoCo)
 only has to produce :class:`LinkSignals` for one environment at one physics
 substep. :func:`evaluate` turns them into per-modality damage rates with the pure
 functions of :mod:`mechanical`, :mod:`thermal` and :mod:`fluid`, untouched.

@@ -23,14 +23,15 @@ LAYERS = ("mjx_damage", "tasks", "train", "apps")  # bottom → top
 BACKENDS = "mjx_damage.backends"
 # What a backend may not import besides the layers above the core: the step that
 # composes backends (physics), the env and wrapper built on that step.
-STEP_MODULES = ("mjx_damage.physics", "mjx_damage.env", "mjx_damage.wrapper")
+STEP_MODULES = ("mjx_damage.physics", "mjx_damage.warp_step", "mjx_damage.env", "mjx_damage.wrapper")
 OUTSIDE = ("benchmarks", "tests")  # scripts and tests sit on top; no package imports them
 # The core modules that may import a backend: the package (its public names), the
-# steps that drive a simulator (physics: MJX; native, native_batch: MuJoCo), and binding's
+# steps that drive a simulator (physics: MJX; warp_step: MJX on Warp; native, native_batch: MuJoCo), and binding's
 # re-export of contact_forces for callers of its old path (drop it once
 # wrapper.py imports from mjx_damage.backends.mjx_jax).
 # the wrapper reads contacts itself for foreign envs (damage once per env step)
-BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.native", "mjx_damage.native_batch", "mjx_damage.wrapper")
+BACKEND_USERS = ("mjx_damage", "mjx_damage.physics", "mjx_damage.warp_step", "mjx_damage.native",
+                 "mjx_damage.native_batch", "mjx_damage.wrapper")
 
 
 def discover(root: str, packages=LAYERS) -> dict[str, str]:

@@ -1,0 +1,147 @@
+"""MuJoCo Warp backend: link signals of a whole batch from the contact layout of MJX's Warp implementation.
+
+MJX's Warp implementation (``mjx.put_model(m, impl="warp")``; needs the optional
+``warp-lang``) keeps the contacts of every world of a batch in ONE list: the
+``d._impl.contact__*`` arrays have ``naconmax`` slots, the first ``nacon[0]``
+in use, in no particular order, each slot naming its world (``contact__worldid``)
+and its constraint rows in that world's ``efc__force`` (``contact__efc_address``,
+with ``efc__force`` f32[B, njmax]). So, unlike :mod:`mjx_damage.backends.mjx_jax`,
+this backend reads a batch, not one environment: it decodes every contact's
+force, then sorts the contacts by world into ``slots`` fixed places per world,
+and the per-environment damage functions run vmapped over the result, untouched.
+
+Contact force of one contact (what ``mj_contactForce`` computes), frame rows
+normal, tangent 1, tangent 2:
+
+* elliptic cone: the first ``min(dim, 3)`` rows as they are;
+* pyramidal cone: normal = the sum of the 2(dim − 1) pyramid rows (dim 1: the
+  one row), tangent i = (row 2i − row 2i+1) · μ_i.
+
+Not read yet (refused by :func:`check_supported`, naming the part): joint-limit
+forces (their rows are placed differently from MJX-JAX's), heat sources (the
+temperature model reads MJX-JAX's contact list) and liquid particles.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from mjx_damage.kinematics import link_acceleration, link_velocity
+from mjx_damage.signals import LinkSignals
+
+if TYPE_CHECKING:  # annotation only
+  from mjx_damage.binding import Binding
+
+
+def check_supported(binding: "Binding") -> None:
+  """Raise ValueError naming the config part this backend does not read yet (before anything compiles)."""
+  if binding.limit_joint.size:
+    raise ValueError("backend: 'warp' does not read joint-limit forces yet; this config tracks limits of "
+                     f"{binding.limit_joint.size} joint(s) (use backend 'jax')")
+  if binding.thermal is not None:
+    raise ValueError("backend: 'warp' does not run the temperature model yet (the scene has heat sources; "
+                     "use backend 'jax')")
+  if binding.liquid is not None:
+    raise ValueError("backend: 'warp' does not run the liquid model yet (the config has 'liquid'; use backend 'jax')")
+
+
+def _local_forces(m: mjx.Model, d: mjx.Data) -> jax.Array:
+  """f32[N, 3] contact-frame force (normal, tangent 1, tangent 2) of every contact slot, N.
+
+  ``geom[0]`` exerts it on ``geom[1]``; slots not in use give whatever their rows hold (masked later).
+  """
+  con = d._impl
+  adr = con.contact__efc_address  # i32[N, R]: the contact's rows in its world's efc_force, −1 past its last
+  efc = con.efc__force  # f32[B, njmax]
+  world = jnp.clip(con.contact__worldid, 0, efc.shape[0] - 1)
+  rows = jnp.where(adr >= 0, efc[world[:, None], jnp.maximum(adr, 0)], 0.0)  # f32[N, R]
+  dim = con.contact__dim
+  if int(m.opt.cone) == int(mujoco.mjtCone.mjCONE_ELLIPTIC):
+    k = np.arange(3)
+    return jnp.where(k[None, :] < dim[:, None], rows[:, :3], 0.0)
+  npyr = jnp.where(dim > 1, 2 * (dim - 1), 1)
+  r = np.arange(rows.shape[1])
+  normal = jnp.sum(jnp.where(r[None, :] < npyr[:, None], rows, 0.0), axis=1)
+  mu = con.contact__friction
+  tangents = []
+  for i in range(2):  # tangents 1 and 2: what the mechanical model reads
+    if 2 * i + 1 < rows.shape[1]:
+      t = (rows[:, 2 * i] - rows[:, 2 * i + 1]) * mu[:, i]
+      tangents.append(jnp.where(dim > i + 1, t, 0.0))
+    else:
+      tangents.append(jnp.zeros_like(normal))
+  return jnp.stack([normal] + tangents, axis=-1)
+
+
+def contact_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, slots: int):
+  """World-frame contact forces on tracked links of every world, in ``slots`` places per world.
+
+  Each contact loads both of its bodies, equal and opposite (as in :mod:`mjx_damage.backends.mjx_jax`).
+
+  Args:
+    d: a batch's ``mjx.Data`` (Warp implementation) after a forward pass, leading axis B on its public fields.
+    slots: S, contact places per world (static); a world's contacts beyond S are dropped and counted.
+
+  Returns:
+    forces: f32[B, 2S, 3] N; force_link: i32[B, 2S] (−1: untracked or empty); overflow: i32[B] contacts dropped.
+  """
+  con = d._impl
+  B = d.qpos.shape[0]
+  N = con.contact__dist.shape[0]
+  frame = con.contact__frame.reshape(N, 3, 3)  # rows: normal, tangent 1, tangent 2
+  world_f = jnp.einsum("kij,ki->kj", frame, _local_forces(m, d))
+  active = (con.contact__dist - con.contact__includemargin) < 0
+  world_f = jnp.where(active[:, None], world_f, 0.0)
+  geom = con.contact__geom
+  geom_link = jnp.asarray(binding.geom_link)
+  link0 = jnp.where(geom[:, 0] >= 0, geom_link[jnp.maximum(geom[:, 0], 0)], -1)
+  link1 = jnp.where(geom[:, 1] >= 0, geom_link[jnp.maximum(geom[:, 1], 0)], -1)
+
+  # sort the slots in use by world; each contact's place is its rank among its world's contacts
+  in_use = jnp.arange(N) < con.nacon[0]
+  key = jnp.where(in_use, con.contact__worldid, B)
+  order = jnp.argsort(key, stable=True)
+  sk = key[order]
+  worlds = jnp.arange(B)
+  start = jnp.searchsorted(sk, worlds, side="left")
+  count = jnp.searchsorted(sk, worlds, side="right") - start
+  rank = jnp.arange(N) - start[jnp.clip(sk, 0, B - 1)]
+  row = jnp.where((sk < B) & (rank < slots), sk, B)  # B: out of range, dropped by the scatter
+  f = jnp.zeros((B, slots, 3), jnp.float32).at[row, rank].set(world_f[order], mode="drop")
+  l0 = jnp.full((B, slots), -1, jnp.int32).at[row, rank].set(link0[order].astype(jnp.int32), mode="drop")
+  l1 = jnp.full((B, slots), -1, jnp.int32).at[row, rank].set(link1[order].astype(jnp.int32), mode="drop")
+  forces = jnp.concatenate([f, -f], axis=1)
+  force_link = jnp.concatenate([l1, l0], axis=1)
+  return forces, force_link, jnp.maximum(count - slots, 0).astype(jnp.int32)
+
+
+def public(d: mjx.Data) -> mjx.Data:
+  """``d`` without the implementation's arrays: its public fields all carry the batch axis, so it vmaps."""
+  return d.replace(_impl=None)
+
+
+def link_signals(binding: "Binding", m: mjx.Model, d: mjx.Data, qvel_before: jax.Array, temperature: jax.Array,
+                 exposure: jax.Array, slots: int) -> tuple[LinkSignals, jax.Array]:
+  """:class:`LinkSignals` with a leading batch axis B, and the contacts each world dropped (i32[B]).
+
+  ``d`` is a batch's data after ``mjx.step`` (Warp implementation), which leaves the forward pass's
+  contacts, constraint forces, ``qacc`` and kinematics in place and only advances ``qpos``/``qvel``;
+  ``qvel_before`` f32[B, nv] is the velocity that forward pass saw (the link accelerations use it).
+  ``temperature``, ``exposure``: f32[B, L].
+  """
+  forces, force_link, overflow = contact_forces(binding, m, d, slots)
+  pub = public(d).replace(qvel=qvel_before)
+  link_acc = jax.vmap(lambda x: link_acceleration(binding, x))(pub)
+  return LinkSignals(forces=forces, force_link=force_link, link_acc=link_acc, temperature=temperature,
+                     exposure=exposure), overflow
+
+
+def link_velocities(binding: "Binding", d: mjx.Data) -> jax.Array:
+  """f32[B, L, 3] link COM velocities as of the forward pass of ``d``'s last step."""
+  return jax.vmap(lambda x: link_velocity(binding, x))(public(d))

@@ -1,0 +1,59 @@
+"""The damage-aware physics step on MuJoCo Warp (MJX ``impl="warp"``): a batch at a time.
+
+:mod:`mjx_damage.physics` steps one environment and is vmapped; MuJoCo Warp keeps
+the contacts of every world in one list (:mod:`mjx_damage.backends.mjx_warp`), so
+this step takes the whole batch: ``step(m, binding, d, ds, n_substeps, slots)``
+with a leading axis B on ``d``'s public fields and on every leaf of ``ds``.
+
+Each substep runs ``mjx.step`` (MJX's integrators do not run on Warp data, and
+``mjx.step`` leaves the forward pass's contacts, constraint forces, ``qacc`` and
+kinematics in place), reads the link signals of every world from them, and
+applies the same damage functions as the MJX-JAX step, vmapped over the batch.
+The order differs from :func:`mjx_damage.physics.substep` only in when the
+signals are read (after the integration of the same forward pass instead of
+before it); what they are computed from is the same.
+"""
+
+from __future__ import annotations
+
+import jax
+from mujoco import mjx
+
+from mjx_damage.backends import mjx_warp
+from mjx_damage.binding import Binding
+from mjx_damage.physics import DamageState, apply_signals, begin_step
+
+
+def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, slots: int):
+  """One physics step of every world with damage; returns ``(d, ds, overflow i32[B])``."""
+  qvel = d.qvel
+  d = jax.vmap(lambda x: mjx.step(m, x))(d)
+  signals, overflow = mjx_warp.link_signals(binding, m, d, qvel, ds.temperature, ds.exposure, slots)
+  dt = m.opt.timestep
+  ds = jax.vmap(lambda s, g: apply_signals(s, g, dt))(ds, signals)
+  return d, ds.replace(link_vel=mjx_warp.link_velocities(binding, d)), overflow
+
+
+def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substeps: int = 1, slots: int = 16):
+  """``n_substeps`` physics steps of a batch with damage at every one.
+
+  Args:
+    m: the model put with ``impl="warp"``; binding: its :class:`Binding` (``mjx_warp.check_supported``).
+    d: the batch's data (``jax.vmap(lambda _: mjx.make_data(model, impl="warp", naconmax=…))``).
+    ds: a :class:`DamageState` with a leading batch axis B on every leaf.
+    slots: contact places per world read for damage (static).
+
+  Returns:
+    ``(d, ds, overflow)``: overflow i32[B] the most contacts a world had beyond ``slots`` in any substep
+    (their forces were not counted).
+  """
+  ds = jax.vmap(begin_step)(ds)
+
+  def body(carry, _):
+    d, ds, worst = carry
+    d, ds, over = substep(m, binding, d, ds, slots)
+    return (d, ds, jax.numpy.maximum(worst, over)), None
+
+  worst = jax.numpy.zeros((d.qpos.shape[0],), jax.numpy.int32)
+  (d, ds, worst), _ = jax.lax.scan(body, (d, ds, worst), None, length=n_substeps)
+  return d, ds, worst

@@ -1,0 +1,115 @@
+"""The MuJoCo Warp backend (mjx_damage.backends.mjx_warp, mjx_damage.warp_step) against the MJX-JAX one.
+
+MJX's Warp implementation runs on CPU too (warp-lang, the ``warp`` extra, is in the test extra), so the
+batch-level readout of Warp's one contact list is checked here: the same health after a drop, the same
+contact forces on a sliding box, the per-world slots and what is refused.
+"""
+
+import numpy as np
+import pytest
+
+warp = pytest.importorskip("warp", reason="warp-lang (the mjx_damage[warp] extra) is not installed")
+warp.config.quiet = True
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import mujoco  # noqa: E402
+from mujoco import mjx  # noqa: E402
+
+import tasks  # noqa: E402
+from mjx_damage import physics, warp_step  # noqa: E402
+from mjx_damage.backends import mjx_jax, mjx_warp  # noqa: E402
+from mjx_damage.binding import bind  # noqa: E402
+from tasks import drop  # noqa: E402
+
+
+def warp_model(model):
+  m = mjx.put_model(model, impl="warp")
+  return m.replace(opt=m.opt.replace(_impl=m.opt._impl.replace(warn_overflow=0)))
+
+
+def warp_data(model, qpos, qvel=None, contacts_per_world=32):
+  B = qpos.shape[0]
+  qvel = jnp.zeros((B, model.nv), jnp.float32) if qvel is None else qvel
+  make = lambda q, v: mjx.make_data(model, impl="warp", naconmax=B * contacts_per_world, njmax=200).replace(
+      qpos=q, qvel=v)
+  return jax.jit(jax.vmap(make))(qpos, qvel)
+
+
+@pytest.fixture(scope="module")
+def drops():
+  """Plates dropped from 5, 20 and 35 cm, 120 substeps, under both implementations."""
+  model = drop.load_scene()
+  binding = bind(model, drop.DROP_CONFIG)
+  heights = np.array([0.05, 0.2, 0.35], np.float32)
+  q = model.jnt_qposadr[model.joint("plate").id]
+  qpos = np.tile(np.asarray(model.qpos0, np.float32), (3, 1))
+  qpos[:, q + 2] = drop.COUNTER_TOP + 0.008 + heights
+  qpos = jnp.asarray(qpos)
+  ds0 = jax.vmap(lambda _: physics.init_state(binding))(jnp.arange(3))
+  mj = mjx.put_model(model)
+  dj = jax.vmap(lambda x: mjx.make_data(mj).replace(qpos=x))(qpos)
+  _, dsj = jax.jit(jax.vmap(lambda d, s: physics.step(mj, binding, d, s, 120)))(dj, ds0)
+  mw = warp_model(model)
+  _, dsw, over = jax.jit(lambda d, s: warp_step.step(mw, binding, d, s, 120, slots=24))(warp_data(model, qpos), ds0)
+  return np.asarray(dsj.link_health), np.asarray(dsw.link_health), np.asarray(over)
+
+
+def test_a_drop_damages_the_plate_as_on_the_jax_implementation(drops):
+  jax_health, warp_health, overflow = drops
+  assert jax_health[0, 0] == 100.0 and jax_health[1, 0] < 90.0  # 5 cm: unharmed; 20 cm: damaged
+  np.testing.assert_allclose(warp_health, jax_health, atol=2.0)  # issue 17: within 2 % of health
+  assert (overflow == 0).all()
+
+
+SLIDE_XML = """<mujoco><option timestep="0.002"/><worldbody><geom type="plane" size="1 1 .1" friction="0.5"/>
+<body name="box" pos="0 0 .0499"><freejoint/><geom type="box" size=".05 .05 .05" mass="2" friction="0.5"/></body>
+</worldbody></mujoco>"""
+SLIDE_CONFIG = {"entities": {"box": {"params": "plate", "bodies": ["box"]}}}
+
+
+def test_contact_forces_of_a_sliding_box_match_the_jax_implementation():
+  """Normal and friction forces (pyramidal cone, condim 3) on a box sliding at 0.5 and 1 m/s."""
+  model = mujoco.MjModel.from_xml_string(SLIDE_XML)
+  binding = bind(model, SLIDE_CONFIG)
+  qpos = jnp.tile(jnp.asarray(model.qpos0, jnp.float32), (2, 1))
+  qvel = jnp.zeros((2, model.nv), jnp.float32).at[:, 0].set(jnp.array([0.5, 1.0]))
+  mj = mjx.put_model(model)
+  dj = jax.vmap(lambda q, v: mjx.forward(mj, mjx.make_data(mj).replace(qpos=q, qvel=v)))(qpos, qvel)
+  fj, lj = jax.vmap(lambda d: mjx_jax.applied_forces(binding, mj, d))(dj)
+  mw = warp_model(model)
+  dw = jax.vmap(lambda d: mjx.step(mw, d))(warp_data(model, qpos, qvel))
+  fw, lw, over = mjx_warp.contact_forces(binding, mw, dw, slots=8)
+  net = lambda f, link: np.asarray(jnp.sum(jnp.where((link == 0)[..., None], f, 0.0), axis=1))  # on the box
+  nj, nw = net(fj, lj), net(fw, lw)
+  assert (nj[:, 2] > 2 * 9.81).all() and (nj[:, 0] < 0).all()  # pushed up, and back against the motion
+  np.testing.assert_allclose(nw, nj, rtol=0.02, atol=0.02 * np.abs(nj).max())
+  assert (np.asarray(over) == 0).all()
+
+
+def test_contacts_beyond_the_slots_are_counted_per_world():
+  model = mujoco.MjModel.from_xml_string(SLIDE_XML)
+  binding = bind(model, SLIDE_CONFIG)
+  qpos = jnp.tile(jnp.asarray(model.qpos0, jnp.float32), (3, 1))
+  mw = warp_model(model)
+  dw = jax.vmap(lambda d: mjx.step(mw, d))(warp_data(model, qpos))
+  forces, links, over = mjx_warp.contact_forces(binding, mw, dw, slots=1)  # a box on a plane: 4 contacts
+  assert forces.shape == (3, 2, 3) and links.shape == (3, 2)
+  assert np.asarray(over).tolist() == [3, 3, 3]
+  # slot 0: the force on geom[1] (the box, link 0), pushed up; slot 1: its reaction on the plane (untracked)
+  assert (np.asarray(links)[:, 0] == 0).all() and (np.asarray(forces)[:, 0, 2] > 0).all()
+  assert (np.asarray(links)[:, 1] == -1).all()
+
+
+def test_what_the_warp_backend_does_not_read_yet_is_refused_by_name():
+  with pytest.raises(ValueError, match="backend.*liquid"):
+    mjx_warp.check_supported(tasks.make("pour_water", robot="gripper").unwrapped.damage_binding)
+  with pytest.raises(ValueError, match="backend.*temperature"):
+    mjx_warp.check_supported(tasks.make("add_firewood", robot="gripper").unwrapped.damage_binding)
+  hinge = mujoco.MjModel.from_xml_string(
+      """<mujoco><worldbody><body name="door"><joint name="h" type="hinge" range="-1 1" limited="true"/>
+      <geom type="box" size=".1 .01 .2"/></body></worldbody></mujoco>""")
+  with pytest.raises(ValueError, match="backend.*joint-limit"):
+    mjx_warp.check_supported(bind(hinge, {"entities": {"door": {"params": "plate", "bodies": ["door"],
+                                                                  "constraint": True}}}))
+  mjx_warp.check_supported(bind(drop.load_scene(), drop.DROP_CONFIG))  # contacts only: supported
