@@ -16,9 +16,15 @@ mounted boxes; the pusher follows the bench's Lissajous sweep over the whole
 grid ("sweep") or a small circle at the grid centre ("local", so most boxes rest
 and can sleep).
 
-warp-lang is not a dependency of the project (a 150 MB wheel; MuJoCo Warp is
-only fast on NVIDIA GPUs, and MJX 3.17 vendors it, so warp-lang is all it
-needs). Usage, with warp-lang importable::
+The ``*-damage`` configs time the damage-aware step instead, every box a tracked
+entity: ``jax-cg-damage`` (``mjx_damage.physics.step`` vmapped) and
+``warp-cg-damage`` / ``warp-newton-damage`` (``mjx_damage.warp_step.step``, the
+MuJoCo Warp backend), so "K free tracked boxes keep X % of the 1-box throughput
+with damage on" is measured for both implementations.
+
+warp-lang is the optional ``warp`` extra (a 150 MB wheel; MuJoCo Warp is only
+fast on NVIDIA GPUs, and MJX 3.17 vendors it, so warp-lang is all it needs).
+Usage, with warp-lang importable::
 
     python benchmarks/warp_scaling.py --envs 8192 --out $OUT/warp_scaling_gpu.json
 
@@ -46,12 +52,17 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-# (name, impl, solver, sleep); CG matches the bench scene (4 iterations, 8 line-search steps)
+# (name, impl, solver, sleep); CG matches the bench scene (4 iterations, 8 line-search steps).
+# "-damage": the damage-aware step with every box tracked (tasks.bench_table.table_config): MJX-JAX's
+# mjx_damage.physics.step vmapped, or MuJoCo Warp's batch step mjx_damage.warp_step.step.
 CONFIGS = {
     "jax-cg": ("jax", "CG", False),
     "warp-cg": ("warp", "CG", False),
     "warp-newton": ("warp", "Newton", False),
     "warp-newton-sleep": ("warp", "Newton", True),
+    "jax-cg-damage": ("jax", "CG", False),
+    "warp-cg-damage": ("warp", "CG", False),
+    "warp-newton-damage": ("warp", "Newton", False),
 }
 
 
@@ -70,31 +81,58 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
   if sleep:
     m.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_SLEEP
   radius = S.sweep_radius(k) if motion == "sweep" else 0.04
+  per_world_contacts = 5 * free + (k - free) + 4  # contact places per world (warp's buffers, damage slots)
   if impl == "warp":
     mx = mjx.put_model(m, impl="warp")
     # iteration-limit warnings are printed from the kernels every step: they would be timed
     mx = mx.replace(opt=mx.opt.replace(_impl=mx.opt._impl.replace(warn_overflow=0)))
-    per_world_contacts = 5 * free + (k - free) + 4
     d = jax.jit(jax.vmap(lambda _: mjx.make_data(m, impl="warp", naconmax=envs * per_world_contacts,
                                                 njmax=4 * per_world_contacts + 8)))(jnp.arange(envs))
   else:
     mx = mjx.put_model(m)
     d = jax.tree.map(lambda x: jnp.broadcast_to(x, (envs,) + x.shape), mjx.make_data(mx))
 
-  def one(d):
-    return mjx.step(mx, d.replace(ctrl=pusher_ctrl(d.time, radius, jnp).astype(d.ctrl.dtype)))
+  def ctrl(d):
+    return d.replace(ctrl=pusher_ctrl(d.time, radius, jnp).astype(d.ctrl.dtype))
 
-  roll = jax.jit(lambda d: jax.lax.fori_loop(0, nstep, lambda _, x: jax.vmap(one)(x), d))
+  damage = config.endswith("-damage")
+  if damage:
+    from mjx_damage import physics, warp_step
+    from mjx_damage.backends import mjx_warp
+    from mjx_damage.binding import bind
+
+    binding = bind(m, S.table_config(k))
+    ds = jax.vmap(lambda _: physics.init_state(binding))(jnp.arange(envs))
+    if impl == "warp":
+      mjx_warp.check_supported(binding)
+      slots = per_world_contacts
+
+      def advance(state):
+        d, ds = state
+        d, ds, _ = warp_step.step(mx, binding, jax.vmap(ctrl)(d), ds, 1, slots)
+        return d, ds
+    else:
+      def advance(state):
+        return jax.vmap(lambda d, ds: physics.step(mx, binding, ctrl(d), ds, 1))(*state)
+    state = (d, ds)
+  else:
+    def advance(d):
+      return jax.vmap(lambda x: mjx.step(mx, ctrl(x)))(d)
+    state = d
+
+  roll = jax.jit(lambda x: jax.lax.fori_loop(0, nstep, lambda _, y: advance(y), x))
   t0 = time.perf_counter()
-  d = jax.block_until_ready(roll(d))
+  state = jax.block_until_ready(roll(state))
   compile_s = time.perf_counter() - t0
   times = []
   for _ in range(2):
     t0 = time.perf_counter()
-    d = jax.block_until_ready(roll(d))
+    state = jax.block_until_ready(roll(state))
     times.append(time.perf_counter() - t0)
+  d = state[0] if damage else state
   z = np.asarray(d.xpos[:, 2:, 2])  # box heights (bodies after world and pusher)
-  return {"config": config, "impl": impl, "solver": solver, "sleep": sleep, "boxes": k, "free_boxes": free,
+  extra = {"damage": True, "min_health": float(jnp.min(state[1].link_health))} if damage else {}
+  return {**extra, "config": config, "impl": impl, "solver": solver, "sleep": sleep, "boxes": k, "free_boxes": free,
           "motion": motion, "nv": int(m.nv), "envs": envs, "steps": nstep, "compile_and_first_s": compile_s,
           "seconds": min(times), "physics_steps_per_s": envs * nstep / min(times),
           "finite": bool(np.isfinite(np.asarray(d.qpos)).all()),
@@ -164,6 +202,7 @@ def main(argv=None) -> int:
     plan.append((config, motion, k, free))
   if args.envs < 1 or args.steps < 1:
     ap.error("--envs and --steps must be >= 1")
+  import mjx_damage  # noqa: F401  (its XLA:CPU flags before jax starts)
   import jax
   import mujoco
 

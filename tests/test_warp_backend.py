@@ -113,3 +113,14 @@ def test_what_the_warp_backend_does_not_read_yet_is_refused_by_name():
     mjx_warp.check_supported(bind(hinge, {"entities": {"door": {"params": "plate", "bodies": ["door"],
                                                                   "constraint": True}}}))
   mjx_warp.check_supported(bind(drop.load_scene(), drop.DROP_CONFIG))  # contacts only: supported
+
+
+def test_warp_scaling_times_the_damage_aware_step_on_both_implementations():
+  """benchmarks/warp_scaling.py's -damage configs run the damage step (every box tracked) and say so."""
+  from conftest import load_benchmark
+
+  W = load_benchmark("warp_scaling")
+  for config in ("jax-cg-damage", "warp-cg-damage"):
+    row = W.measure(config, 2, 2, "sweep", 2, 3)
+    assert row["damage"] and row["finite"] and row["config"] == config
+    assert 0.0 <= row["min_health"] <= 100.0 and row["physics_steps_per_s"] > 0
