@@ -255,15 +255,22 @@ def set_source(ds, source, on, binding=None, temperature=None):
 def touching(tm: ThermalModel, binding, d) -> jax.Array:
   """f32[L, S]: 1 where an active contact joins link l's geoms and source s's geom.
 
-  Uses the same contact slots as mechanical damage (``d._impl.contact``); an
+  Uses the same contact slots as mechanical damage (``d._impl.contact``, MJX-JAX's layout); an
   inactive slot (``dist − includemargin ≥ 0``) touches nothing.
   """
-  L, S = binding.num_links, tm.num_sources
   con = d._impl.contact
-  if con.dist.shape[0] == 0 or S == 0 or L == 0:
+  if con.dist.shape[0] == 0:
+    return jnp.zeros((binding.num_links, tm.num_sources), jnp.float32)
+  return touching_pairs(tm, binding, con.geom, con.dist - con.includemargin < 0)
+
+
+def touching_pairs(tm: ThermalModel, binding, geom: jax.Array, active: jax.Array) -> jax.Array:
+  """f32[L, S] of :func:`touching` from any backend's contacts: geom pairs i32[C, 2] (−1: none), active bool[C]."""
+  L, S = binding.num_links, tm.num_sources
+  if geom.shape[0] == 0 or S == 0 or L == 0:
     return jnp.zeros((L, S), jnp.float32)
-  g = jnp.asarray(con.geom)
-  valid = (con.dist - con.includemargin < 0) & (g[:, 0] >= 0) & (g[:, 1] >= 0)
+  g = jnp.asarray(geom)
+  valid = active & (g[:, 0] >= 0) & (g[:, 1] >= 0)
   gc = jnp.maximum(g, 0)
   geom_link = jnp.asarray(binding.geom_link)
   geom_source = jnp.asarray(tm.geom_source)

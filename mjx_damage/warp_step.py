@@ -8,7 +8,8 @@ with a leading axis B on ``d``'s public fields and on every leaf of ``ds``.
 Each substep runs ``mjx.step`` (MJX's integrators do not run on Warp data, and
 ``mjx.step`` leaves the forward pass's contacts, constraint forces, ``qacc`` and
 kinematics in place), reads the link signals of every world from them, and
-applies the same damage functions as the MJX-JAX step, vmapped over the batch.
+applies the same temperature, liquid and damage functions as the MJX-JAX step,
+vmapped over the batch.
 The order differs from :func:`mjx_damage.physics.substep` only in when the
 signals are read (after the integration of the same forward pass instead of
 before it); what they are computed from is the same.
@@ -19,19 +20,31 @@ from __future__ import annotations
 import jax
 from mujoco import mjx
 
+from mjx_damage import liquid as Lq
+from mjx_damage import temperature as T
 from mjx_damage.backends import mjx_warp
 from mjx_damage.binding import Binding
 from mjx_damage.physics import DamageState, apply_signals, begin_step
 
 
 def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, slots: int):
-  """One physics step of every world with damage; returns ``(d, ds, overflow i32[B])``."""
+  """One physics step of every world with damage; returns ``(d, ds, overflow i32[B])``.
+
+  In :func:`mjx_damage.physics.substep`'s order: temperature, liquid, then the damage of the signals.
+  """
   qvel = d.qvel
   d = jax.vmap(lambda x: mjx.step(m, x))(d)
-  signals, overflow = mjx_warp.link_signals(binding, m, d, qvel, ds.temperature, ds.exposure, slots)
+  wc = mjx_warp.world_contacts(m, d, slots)
+  pub = mjx_warp.public(d)
   dt = m.opt.timestep
+  tm = binding.thermal
+  if tm is not None:
+    touch = jax.vmap(lambda g, a: T.touching_pairs(tm, binding, g, a))(wc.geom, wc.active)
+    ds = jax.vmap(lambda x, s, t: T.advance(m, binding, x, s, dt, touch=t))(pub, ds, touch)
+  ds = jax.vmap(lambda x, s: Lq.advance(m, binding, x, s, dt))(pub, ds)
+  signals = mjx_warp.link_signals(binding, d, wc, qvel, ds.temperature, ds.exposure)
   ds = jax.vmap(lambda s, g: apply_signals(s, g, dt))(ds, signals)
-  return d, ds.replace(link_vel=mjx_warp.link_velocities(binding, d)), overflow
+  return d, ds.replace(link_vel=mjx_warp.link_velocities(binding, d)), wc.overflow
 
 
 def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substeps: int = 1, slots: int = 16):

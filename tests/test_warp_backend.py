@@ -101,11 +101,7 @@ def test_contacts_beyond_the_slots_are_counted_per_world():
   assert (np.asarray(links)[:, 1] == -1).all()
 
 
-def test_what_the_warp_backend_does_not_read_yet_is_refused_by_name():
-  with pytest.raises(ValueError, match="backend.*liquid"):
-    mjx_warp.check_supported(tasks.make("pour_water", robot="gripper").unwrapped.damage_binding)
-  with pytest.raises(ValueError, match="backend.*temperature"):
-    mjx_warp.check_supported(tasks.make("add_firewood", robot="gripper").unwrapped.damage_binding)
+def test_joint_limit_forces_are_refused_by_name():
   hinge = mujoco.MjModel.from_xml_string(
       """<mujoco><worldbody><body name="door"><joint name="h" type="hinge" range="-1 1" limited="true"/>
       <geom type="box" size=".1 .01 .2"/></body></worldbody></mujoco>""")
@@ -113,6 +109,57 @@ def test_what_the_warp_backend_does_not_read_yet_is_refused_by_name():
     mjx_warp.check_supported(bind(hinge, {"entities": {"door": {"params": "plate", "bodies": ["door"],
                                                                   "constraint": True}}}))
   mjx_warp.check_supported(bind(drop.load_scene(), drop.DROP_CONFIG))  # contacts only: supported
+  mjx_warp.check_supported(tasks.make("pour_water", robot="gripper").unwrapped.damage_binding)  # liquid
+  mjx_warp.check_supported(tasks.make("add_firewood", robot="gripper").unwrapped.damage_binding)  # heat
+
+
+def both_steps(model, config, substeps, qpos=None):
+  """(MJX-JAX damage state, Warp damage state) after ``substeps`` from ``qpos`` (default qpos0), 2 envs."""
+  binding = bind(model, config)
+  mjx_warp.check_supported(binding)
+  qpos = jnp.tile(jnp.asarray(model.qpos0 if qpos is None else qpos, jnp.float32), (2, 1))
+  ds0 = jax.vmap(lambda k: physics.init_state(binding, rng=k))(jax.random.split(jax.random.PRNGKey(0), 2))
+  mj = mjx.put_model(model)
+  dj = jax.vmap(lambda q: mjx.make_data(mj).replace(qpos=q))(qpos)
+  _, dsj = jax.jit(jax.vmap(lambda d, s: physics.step(mj, binding, d, s, substeps)))(dj, ds0)
+  _, dsw, over = jax.jit(lambda d, s: warp_step.step(warp_model(model), binding, d, s, substeps, slots=16))(
+      warp_data(model, qpos), ds0)
+  assert (np.asarray(over) == 0).all()
+  return dsj, dsw
+
+
+HOT_XML = """<mujoco><option timestep="0.004"/><worldbody><geom type="plane" size="1 1 .1"/>
+<geom name="hot" type="box" size=".1 .1 .01" pos="0 0 .01"/>
+<body name="pan" pos="0 0 .0699"><freejoint/><geom type="box" size=".05 .05 .05" mass="1"/></body>
+<body name="cup" pos=".3 0 .05"><freejoint/><geom type="box" size=".03 .03 .05" mass=".2"/></body>
+</worldbody></mujoco>"""
+
+
+def test_temperature_from_warp_contacts_matches_the_jax_implementation():
+  """A pan resting on a hot plate (conduction through the contact) and a cup beside it (radiation only)."""
+  config = {"temperature": {"sources": {"plate": {"geom": "hot", "temperature": 300, "on": True, "reach": 0.05}}},
+            "entities": {n: {"params": "plate", "bodies": [n], "heat": {"conduction": 2.0, "radiation": 0.1,
+                                                                         "cooling": 0.05}} for n in ("pan", "cup")}}
+  dsj, dsw = both_steps(mujoco.MjModel.from_xml_string(HOT_XML), config, 150)
+  tj, tw = np.asarray(dsj.temperature), np.asarray(dsw.temperature)
+  assert (tj[:, 0] > tj[:, 1] + 20).all()  # the pan touches the plate and heats faster
+  np.testing.assert_allclose(tw, tj, rtol=1e-3)
+
+
+WET_XML = """<mujoco><option timestep="0.004"/><worldbody><geom type="plane" size="1 1 .1"/>
+<body name="tray"><geom type="box" size=".1 .1 .005" pos="0 0 .005"/></body>
+<body name="ball" pos=".5 0 .02"><freejoint/><geom type="sphere" size=".02"/></body></worldbody></mujoco>"""
+
+
+def test_liquid_on_warp_data_matches_the_jax_implementation():
+  """Eight particles dropped on a tracked tray wet it, and the fluid damage follows, on both implementations."""
+  config = {"liquid": {"particles": 8, "radius": 0.008, "spawn": {"center": [0, 0, 0.1], "size": [0.012] * 3}},
+            "entities": {"tray": {"params": "laptop", "bodies": ["tray"]}}}
+  dsj, dsw = both_steps(mujoco.MjModel.from_xml_string(WET_XML), config, 100)
+  assert (np.asarray(dsj.exposure) == 8).all()  # every particle on the tray
+  np.testing.assert_allclose(np.asarray(dsw.liquid.pos), np.asarray(dsj.liquid.pos), atol=1e-4)
+  np.testing.assert_array_equal(np.asarray(dsw.exposure), np.asarray(dsj.exposure))
+  np.testing.assert_allclose(np.asarray(dsw.link_health), np.asarray(dsj.link_health), atol=0.01)
 
 
 def test_warp_scaling_times_the_damage_aware_step_on_both_implementations():

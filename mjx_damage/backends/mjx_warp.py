@@ -17,9 +17,10 @@ normal, tangent 1, tangent 2:
 * pyramidal cone: normal = the sum of the 2(dim − 1) pyramid rows (dim 1: the
   one row), tangent i = (row 2i − row 2i+1) · μ_i.
 
-Not read yet (refused by :func:`check_supported`, naming the part): joint-limit
-forces (their rows are placed differently from MJX-JAX's), heat sources (the
-temperature model reads MJX-JAX's contact list) and liquid particles.
+The same places give the temperature model its link–source contacts
+(:func:`mjx_damage.temperature.touching_pairs`). Not read yet (refused by
+:func:`check_supported`): joint-limit forces (their rows are placed
+differently from MJX-JAX's).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from flax import struct
 from mujoco import mjx
 
 from mjx_damage.kinematics import link_acceleration, link_velocity
@@ -44,11 +46,6 @@ def check_supported(binding: "Binding") -> None:
   if binding.limit_joint.size:
     raise ValueError("backend: 'warp' does not read joint-limit forces yet; this config tracks limits of "
                      f"{binding.limit_joint.size} joint(s) (use backend 'jax')")
-  if binding.thermal is not None:
-    raise ValueError("backend: 'warp' does not run the temperature model yet (the scene has heat sources; "
-                     "use backend 'jax')")
-  if binding.liquid is not None:
-    raise ValueError("backend: 'warp' does not run the liquid model yet (the config has 'liquid'; use backend 'jax')")
 
 
 def _local_forces(m: mjx.Model, d: mjx.Data) -> jax.Array:
@@ -79,17 +76,28 @@ def _local_forces(m: mjx.Model, d: mjx.Data) -> jax.Array:
   return jnp.stack([normal] + tangents, axis=-1)
 
 
-def contact_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, slots: int):
-  """World-frame contact forces on tracked links of every world, in ``slots`` places per world.
+@struct.dataclass
+class WorldContacts:
+  """The contacts of every world of a batch in ``S`` fixed places per world (leading axis B on each).
 
-  Each contact loads both of its bodies, equal and opposite (as in :mod:`mjx_damage.backends.mjx_jax`).
+  force:    f32[B, S, 3] world-frame force ``geom[0]`` exerts on ``geom[1]``, N (0: inactive or empty)
+  geom:     i32[B, S, 2] the contact's geoms (−1: empty place)
+  active:   bool[B, S] an active contact (``dist − includemargin < 0``)
+  overflow: i32[B] the world's contacts beyond S (dropped)
+  """
+
+  force: jax.Array
+  geom: jax.Array
+  active: jax.Array
+  overflow: jax.Array
+
+
+def world_contacts(m: mjx.Model, d: mjx.Data, slots: int) -> WorldContacts:
+  """Warp's one contact list sorted by world into ``slots`` places per world.
 
   Args:
     d: a batch's ``mjx.Data`` (Warp implementation) after a forward pass, leading axis B on its public fields.
     slots: S, contact places per world (static); a world's contacts beyond S are dropped and counted.
-
-  Returns:
-    forces: f32[B, 2S, 3] N; force_link: i32[B, 2S] (−1: untracked or empty); overflow: i32[B] contacts dropped.
   """
   con = d._impl
   B = d.qpos.shape[0]
@@ -98,12 +106,8 @@ def contact_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, slots: int):
   world_f = jnp.einsum("kij,ki->kj", frame, _local_forces(m, d))
   active = (con.contact__dist - con.contact__includemargin) < 0
   world_f = jnp.where(active[:, None], world_f, 0.0)
-  geom = con.contact__geom
-  geom_link = jnp.asarray(binding.geom_link)
-  link0 = jnp.where(geom[:, 0] >= 0, geom_link[jnp.maximum(geom[:, 0], 0)], -1)
-  link1 = jnp.where(geom[:, 1] >= 0, geom_link[jnp.maximum(geom[:, 1], 0)], -1)
 
-  # sort the slots in use by world; each contact's place is its rank among its world's contacts
+  # sort the places in use by world; each contact's place is its rank among its world's contacts
   in_use = jnp.arange(N) < con.nacon[0]
   key = jnp.where(in_use, con.contact__worldid, B)
   order = jnp.argsort(key, stable=True)
@@ -113,12 +117,35 @@ def contact_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, slots: int):
   count = jnp.searchsorted(sk, worlds, side="right") - start
   rank = jnp.arange(N) - start[jnp.clip(sk, 0, B - 1)]
   row = jnp.where((sk < B) & (rank < slots), sk, B)  # B: out of range, dropped by the scatter
-  f = jnp.zeros((B, slots, 3), jnp.float32).at[row, rank].set(world_f[order], mode="drop")
-  l0 = jnp.full((B, slots), -1, jnp.int32).at[row, rank].set(link0[order].astype(jnp.int32), mode="drop")
-  l1 = jnp.full((B, slots), -1, jnp.int32).at[row, rank].set(link1[order].astype(jnp.int32), mode="drop")
-  forces = jnp.concatenate([f, -f], axis=1)
-  force_link = jnp.concatenate([l1, l0], axis=1)
-  return forces, force_link, jnp.maximum(count - slots, 0).astype(jnp.int32)
+
+  def place(x, fill):
+    out = jnp.full((B, slots) + x.shape[1:], fill, x.dtype)
+    return out.at[row, rank].set(x[order], mode="drop")
+
+  return WorldContacts(force=place(world_f.astype(jnp.float32), 0.0),
+                       geom=place(con.contact__geom.astype(jnp.int32), -1),
+                       active=place(active & in_use, False),
+                       overflow=jnp.maximum(count - slots, 0).astype(jnp.int32))
+
+
+def contact_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, slots: int):
+  """World-frame contact forces on tracked links of every world, in ``slots`` places per world.
+
+  Each contact loads both of its bodies, equal and opposite (as in :mod:`mjx_damage.backends.mjx_jax`).
+
+  Returns:
+    forces: f32[B, 2S, 3] N; force_link: i32[B, 2S] (−1: untracked or empty); overflow: i32[B] contacts dropped.
+  """
+  wc = world_contacts(m, d, slots)
+  return (*_link_forces(binding, wc), wc.overflow)
+
+
+def _link_forces(binding: "Binding", wc: WorldContacts):
+  geom_link = jnp.asarray(binding.geom_link)
+  g = wc.geom
+  link0 = jnp.where(g[..., 0] >= 0, geom_link[jnp.maximum(g[..., 0], 0)], -1)
+  link1 = jnp.where(g[..., 1] >= 0, geom_link[jnp.maximum(g[..., 1], 0)], -1)
+  return jnp.concatenate([wc.force, -wc.force], axis=1), jnp.concatenate([link1, link0], axis=1).astype(jnp.int32)
 
 
 def public(d: mjx.Data) -> mjx.Data:
@@ -126,20 +153,20 @@ def public(d: mjx.Data) -> mjx.Data:
   return d.replace(_impl=None)
 
 
-def link_signals(binding: "Binding", m: mjx.Model, d: mjx.Data, qvel_before: jax.Array, temperature: jax.Array,
-                 exposure: jax.Array, slots: int) -> tuple[LinkSignals, jax.Array]:
-  """:class:`LinkSignals` with a leading batch axis B, and the contacts each world dropped (i32[B]).
+def link_signals(binding: "Binding", d: mjx.Data, wc: WorldContacts, qvel_before: jax.Array, temperature: jax.Array,
+                 exposure: jax.Array) -> LinkSignals:
+  """:class:`LinkSignals` with a leading batch axis B.
 
   ``d`` is a batch's data after ``mjx.step`` (Warp implementation), which leaves the forward pass's
   contacts, constraint forces, ``qacc`` and kinematics in place and only advances ``qpos``/``qvel``;
-  ``qvel_before`` f32[B, nv] is the velocity that forward pass saw (the link accelerations use it).
-  ``temperature``, ``exposure``: f32[B, L].
+  ``wc`` its :func:`world_contacts`; ``qvel_before`` f32[B, nv] the velocity that forward pass saw
+  (the link accelerations use it). ``temperature``, ``exposure``: f32[B, L].
   """
-  forces, force_link, overflow = contact_forces(binding, m, d, slots)
+  forces, force_link = _link_forces(binding, wc)
   pub = public(d).replace(qvel=qvel_before)
   link_acc = jax.vmap(lambda x: link_acceleration(binding, x))(pub)
   return LinkSignals(forces=forces, force_link=force_link, link_acc=link_acc, temperature=temperature,
-                     exposure=exposure), overflow
+                     exposure=exposure)
 
 
 def link_velocities(binding: "Binding", d: mjx.Data) -> jax.Array:
