@@ -139,6 +139,36 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
           "box_height_min_max_m": [float(z.min()), float(z.max())]}
 
 
+def measure_task(name: str, backend: str, envs: int, nstep: int, robot: str) -> dict:
+  """Env-steps/s of registry task ``name``'s damage-aware step (zero action, ``vmap(env.step)`` in a compiled
+  loop) with its physics on ``backend``: "jax" (MJX-JAX) or "warp" (MuJoCo Warp via tasks.make(backend="warp"))."""
+  import jax
+  import jax.numpy as jnp
+  import numpy as np
+
+  import tasks
+
+  kw = {"robot": robot, **({"backend": "warp", "num_envs": envs} if backend == "warp" else {})}
+  env = tasks.make(name, **kw)
+  state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), envs))
+  act = jnp.zeros((envs, env.action_size))
+  roll = jax.jit(lambda s: jax.lax.fori_loop(0, nstep, lambda _, x: jax.vmap(env.step)(x, act), s))
+  t0 = time.perf_counter()
+  state = jax.block_until_ready(roll(state))
+  compile_s = time.perf_counter() - t0
+  times = []
+  for _ in range(2):
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(roll(state))
+    times.append(time.perf_counter() - t0)
+  n_sub = env.unwrapped.n_substeps
+  return {"task": name, "backend": backend, "robot": robot, "envs": envs, "steps": nstep, "n_substeps": n_sub,
+          "compile_and_first_s": compile_s, "seconds": min(times), "env_steps_per_s": envs * nstep / min(times),
+          "physics_steps_per_s": envs * nstep * n_sub / min(times),
+          "finite": bool(np.isfinite(np.asarray(state.pipeline_state.qpos)).all()),
+          "min_health": float(jnp.min(state.info["entity_health"]))}
+
+
 def _k1(rows: list[dict], r: dict):
   """The K=1 row of ``r``'s config and motion (the denominator of its ratio), or None."""
   return next((b for b in rows if b["config"] == r["config"] and b["motion"] == r["motion"] and b["boxes"] == 1),
@@ -173,6 +203,16 @@ def report_md(res: dict) -> str:
     rel = f"{r['physics_steps_per_s'] / base['physics_steps_per_s']:.1%}" if base else ""
     lines.append(f"| {r['config']} | {r['motion']} | {r['boxes']} | {r['free_boxes']} | {r['nv']} | "
                  f"{r['physics_steps_per_s']:,.0f} | {rel} | {r['compile_and_first_s']:.1f} | {r['finite']} |")
+  if res.get("task_rows"):
+    lines += ["", "Task step with damage (zero action, `vmap(env.step)`; `tasks.make(name, backend=\"warp\", "
+              "num_envs=N)` for Warp):", "",
+              "| task | robot | backend | envs | env-steps/s | physics steps/s | x jax | compile+first s | finite |",
+              "|---|---|---|---:|---:|---:|---:|---:|---|"]
+    for r in res["task_rows"]:
+      base = next((b for b in res["task_rows"] if b["task"] == r["task"] and b["backend"] == "jax"), None)
+      rel = f"{r['env_steps_per_s'] / base['env_steps_per_s']:.2f}" if base else ""
+      lines.append(f"| {r['task']} | {r['robot']} | {r['backend']} | {r['envs']} | {r['env_steps_per_s']:,.0f} | "
+                   f"{r['physics_steps_per_s']:,.0f} | {rel} | {r['compile_and_first_s']:.1f} | {r['finite']} |")
   if res.get("errors"):
     lines += ["", "Errors: " + "; ".join(json.dumps(e) for e in res["errors"])]
   return "\n".join(lines) + "\n"
@@ -188,6 +228,10 @@ def main(argv=None) -> int:
                   "warp-newton:local:1:1,warp-newton:local:32:32,"
                   "warp-newton-sleep:local:1:1,warp-newton-sleep:local:32:32",
                   help="comma-separated config:motion:boxes:free points, run in order")
+  ap.add_argument("--tasks", default="", help="registry tasks whose damage-aware step is also timed on both "
+                  "backends (comma-separated, e.g. place_plate; default none)")
+  ap.add_argument("--robot", default="gripper", help="robot of --tasks (default gripper)")
+  ap.add_argument("--task-steps", type=int, default=20, help="env steps per timed call of --tasks")
   ap.add_argument("--out", required=True)
   args = ap.parse_args(argv)
   plan = []
@@ -200,8 +244,18 @@ def main(argv=None) -> int:
     if config not in CONFIGS or motion not in ("sweep", "local") or not 1 <= free <= k:
       ap.error(f"--plan: bad point {item!r} (configs {sorted(CONFIGS)}, motion sweep|local, 1 <= free <= boxes)")
     plan.append((config, motion, k, free))
-  if args.envs < 1 or args.steps < 1:
-    ap.error("--envs and --steps must be >= 1")
+  if args.envs < 1 or args.steps < 1 or args.task_steps < 1:
+    ap.error("--envs, --steps and --task-steps must be >= 1")
+  task_list = [t for t in args.tasks.split(",") if t]
+  if task_list:
+    import tasks
+
+    try:
+      tasks.check_robot(args.robot, task_list, "--robot")
+      for t in task_list:
+        tasks.task_class(t)
+    except ValueError as e:
+      ap.error(f"--tasks/--robot: {e}")
   import mjx_damage  # noqa: F401  (its XLA:CPU flags before jax starts)
   import jax
   import mujoco
@@ -230,6 +284,20 @@ def main(argv=None) -> int:
       json.dump(res, f, indent=1)
     with open(os.path.splitext(args.out)[0] + ".md", "w") as f:
       f.write(report_md(res))
+  res["task_rows"] = []
+  for name in task_list:
+    for backend in ("jax", "warp"):
+      try:
+        row = measure_task(name, backend, args.envs, args.task_steps, args.robot)
+        res["task_rows"].append(row)
+        print(json.dumps(row), flush=True)
+      except Exception as e:  # keep the other points
+        res["errors"].append({"point": f"task:{name}:{backend}", "error": f"{type(e).__name__}: {str(e)[:300]}"})
+        print("error", res["errors"][-1], flush=True)
+      with open(args.out, "w") as f:
+        json.dump(res, f, indent=1)
+      with open(os.path.splitext(args.out)[0] + ".md", "w") as f:
+        f.write(report_md(res))
   print(json.dumps(res["summary"], indent=1))
   return 0
 

@@ -70,3 +70,49 @@ def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substep
   worst = jax.numpy.zeros((d.qpos.shape[0],), jax.numpy.int32)
   (d, ds, worst), _ = jax.lax.scan(body, (d, ds, worst), None, length=n_substeps)
   return d, ds, worst
+
+
+def check_supported(binding: Binding) -> None:
+  """ValueError naming what the Warp backend does not read yet (:func:`mjx_warp.check_supported`)."""
+  mjx_warp.check_supported(binding)
+
+
+def _is_impl(path) -> bool:
+  return any(getattr(k, "name", None) == "_impl" for k in path)
+
+
+def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
+  """``step(d, ds) -> (d, ds)`` of ONE environment that steps the whole batch at once when vmapped.
+
+  Environments are written per environment and vmapped (Brax's ``VmapWrapper``, the trainers, the
+  evaluator), but MuJoCo Warp's contacts are one list for the batch: under ``jax.vmap`` this function's
+  batching rule (``jax.custom_batching.custom_vmap``) receives the batch and runs :func:`step` on it.
+  Called on one environment it runs as a batch of one. One level of vmap: the batch is the worlds that
+  ``mjx.make_data(..., impl="warp", naconmax=…)`` was vmapped over.
+  """
+  from jax import custom_batching
+  from mujoco.mjx.warp import ffi as warp_ffi
+  from mujoco.mjx.warp import types as warp_types
+
+  ndim = warp_types._NDIM["Data"]  # pylint: disable=protected-access  (fields with a world axis)
+
+  @custom_batching.custom_vmap
+  def one(d, ds):
+    d1 = jax.tree.map_with_path(
+        lambda p, x: warp_ffi._expand_dim_from_path(p, x, ndim) if _is_impl(p) else x[None], d)
+    d2, ds2, _ = step(m, binding, d1, jax.tree.map(lambda x: x[None], ds), n_substeps, slots)
+    return (jax.tree.map_with_path(lambda p, x, x0: warp_ffi._squeeze_dim(x, x0) if _is_impl(p) else x[0], d2, d),
+            jax.tree.map(lambda x: x[0], ds2))
+
+  @one.def_vmap
+  def batched(axis_size, in_batched, d, ds):
+    bd, bds = in_batched
+    # a public field or damage leaf the same for every world (e.g. one ctrl for all) gets the batch axis
+    d = jax.tree.map_with_path(
+        lambda p, x, b: x if (b or _is_impl(p)) else jax.numpy.broadcast_to(x, (axis_size,) + x.shape), d, bd)
+    ds = jax.tree.map(lambda x, b: x if b else jax.numpy.broadcast_to(x, (axis_size,) + x.shape), ds, bds)
+    d2, ds2, _ = step(m, binding, d, ds, n_substeps, slots)
+    out_d = jax.tree.map_with_path(lambda p, x, b: b if _is_impl(p) else True, d2, bd)
+    return (d2, ds2), (out_d, jax.tree.map(lambda _: True, ds2))
+
+  return one

@@ -162,7 +162,13 @@ def default_config(name: str) -> dict:
   cfg = {k: v for k, (_, v) in _WRAPPER_OPTIONS.items()}
   cfg.update(_task_options(cls))
   cfg["robot"] = robots.DEFAULT
+  cfg.update(_BACKEND_OPTIONS)
   return cfg
+
+
+# make() keywords of the physics backend (mjx_damage.env.DamageEnv): "jax", or "warp" (MuJoCo Warp) stepping
+# num_envs environments at once (the batch the env is vmapped over) with warp_contacts contact places each
+_BACKEND_OPTIONS = {"backend": "jax", "num_envs": 0, "warp_contacts": 32}
 
 
 def make(name: str, **overrides):
@@ -183,10 +189,18 @@ def make(name: str, **overrides):
   if robot not in supported:
     raise ValueError(f"robot: task {name!r} supports {', '.join(supported)} only, got {robot!r}")
   wrapper_kw = {_WRAPPER_OPTIONS[k][0]: overrides.get(k, v) for k, (_, v) in _WRAPPER_OPTIONS.items()}
-  task_kw = {k: v for k, v in overrides.items() if k not in _WRAPPER_OPTIONS and k != "robot"}
-  # the robot is chosen per instance before the task's constructor runs (constructors take no robot)
+  task_kw = {k: v for k, v in overrides.items()
+             if k not in _WRAPPER_OPTIONS and k not in _BACKEND_OPTIONS and k != "robot"}
+  # the robot and the physics backend are chosen per instance before the task's constructor runs
+  # (constructors take neither); DamageEnv checks the backend's values
   env = cls.__new__(cls)
   env.robot_name = robot
+  env.physics_backend = overrides.get("backend", "jax")
+  if env.physics_backend == "warp":
+    env.warp_worlds = overrides.get("num_envs", 0)
+    env.warp_contacts = overrides.get("warp_contacts", _BACKEND_OPTIONS["warp_contacts"])
+  elif "num_envs" in overrides or "warp_contacts" in overrides:
+    raise ValueError("num_envs/warp_contacts: only with backend='warp'")
   env.__init__(**task_kw)
   return DamageWrapper(env, **wrapper_kw)
 

@@ -122,7 +122,7 @@ class Task(DamageEnv):
     self.success_bonus = float(success_bonus)
     self.ws_lo, self.ws_hi = self.robot.workspace(*self.workspace)
     self.setup(mj_model)
-    d0 = jax.eval_shape(lambda: mjx.make_data(self.sys))
+    d0 = jax.eval_shape(self.make_data)
     info0 = jax.eval_shape(lambda r: self.sample_init(r, jnp.zeros(mj_model.nq))[1], jax.random.PRNGKey(0))
     self._obs_size = int(jax.eval_shape(self.observe, d0, info0).shape[-1])
 
@@ -195,7 +195,7 @@ class Task(DamageEnv):
 
   def reset(self, rng: jax.Array) -> State:
     r_init, r_dmg = jax.random.split(rng)
-    d = mjx.make_data(self.sys)
+    d = self.make_data()
     qpos, task_info = self.sample_init(r_init, d.qpos)
     d = d.replace(qpos=qpos, ctrl=self.robot.hold_ctrl(qpos, self.mj_model.nu))
     d = mjx.forward(self.sys, d)

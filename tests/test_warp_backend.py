@@ -171,3 +171,50 @@ def test_warp_scaling_times_the_damage_aware_step_on_both_implementations():
     row = W.measure(config, 2, 2, "sweep", 2, 3)
     assert row["damage"] and row["finite"] and row["config"] == config
     assert 0.0 <= row["min_health"] <= 100.0 and row["physics_steps_per_s"] > 0
+
+
+def test_a_task_runs_on_warp_and_its_scripted_policies_separate_as_on_jax():
+  """tasks.make(..., backend="warp", num_envs=B): the env is written per environment and vmapped, and its
+  physics step runs the batch on MuJoCo Warp (custom_vmap); Place Plate's scripted policies end as on MJX-JAX."""
+  from tasks import rollout
+
+  B = 4
+  out = {}
+  for backend in ("jax", "warp"):
+    kw = {"backend": "warp", "num_envs": B} if backend == "warp" else {}
+    env = tasks.make("place_plate", robot="gripper", obs_mode="paper", **kw)
+    assert env.unwrapped.physics_backend == backend
+    run = rollout.rollout_fn(env, [tasks.scripted_policy(env, s) for s in ("safe", "unsafe")],
+                             env.unwrapped.episode_length)
+    st = run(jax.random.split(jax.random.PRNGKey(0), B), jnp.array([0, 0, 1, 1]))
+    out[backend] = (np.asarray(st.completed), np.asarray(st.entity_health), np.asarray(st.any_nan))
+  (cj, hj, nj), (cw, hw, nw) = out["jax"], out["warp"]
+  assert cw.tolist() == cj.tolist() == [1, 1, 1, 1] and not nw.any()
+  assert (hw[:2] > 95).all() and (hw[2:, 0] < 5).all()  # safe: intact; unsafe: the plate broken
+  np.testing.assert_allclose(hw, hj, atol=2.0)
+
+
+@pytest.mark.parametrize("kw, field", [
+    ({"backend": "cuda"}, "backend"),
+    ({"backend": "warp"}, "num_envs"),
+    ({"backend": "warp", "num_envs": -2}, "num_envs"),
+    ({"backend": "warp", "num_envs": 4, "warp_contacts": 0}, "warp_contacts"),
+    ({"num_envs": 4}, "num_envs"),
+])
+def test_bad_backend_options_are_refused_by_name(kw, field):
+  with pytest.raises(ValueError, match=field):
+    tasks.make("place_plate", robot="gripper", **kw)
+
+
+def test_warp_scaling_times_a_task_step_on_both_backends(capsys):
+  from conftest import load_benchmark
+
+  W = load_benchmark("warp_scaling")
+  for bad in (["--tasks", "no_such_task"], ["--tasks", "place_plate", "--robot", "no_robot"],
+              ["--tasks", "place_plate", "--task-steps", "0"]):
+    with pytest.raises(SystemExit):
+      W.main(bad + ["--out", "unused.json"])
+    assert "--" in capsys.readouterr().err
+  for backend in ("jax", "warp"):
+    row = W.measure_task("place_plate", backend, 2, 2, "gripper")
+    assert row["backend"] == backend and row["finite"] and row["env_steps_per_s"] > 0 and row["n_substeps"] == 6
