@@ -66,6 +66,22 @@ CONFIGS = {
 }
 
 
+def timed(advance, state, nstep: int):
+  """``nstep`` calls of ``advance`` in one compiled loop: (state, compile-and-first-call s, [2 timed calls' s])."""
+  import jax
+
+  roll = jax.jit(lambda x: jax.lax.fori_loop(0, nstep, lambda _, y: advance(y), x))
+  t0 = time.perf_counter()
+  state = jax.block_until_ready(roll(state))
+  compile_s = time.perf_counter() - t0
+  times = []
+  for _ in range(2):
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(roll(state))
+    times.append(time.perf_counter() - t0)
+  return state, compile_s, times
+
+
 def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) -> dict:
   import jax
   import jax.numpy as jnp
@@ -120,15 +136,7 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
       return jax.vmap(lambda x: mjx.step(mx, ctrl(x)))(d)
     state = d
 
-  roll = jax.jit(lambda x: jax.lax.fori_loop(0, nstep, lambda _, y: advance(y), x))
-  t0 = time.perf_counter()
-  state = jax.block_until_ready(roll(state))
-  compile_s = time.perf_counter() - t0
-  times = []
-  for _ in range(2):
-    t0 = time.perf_counter()
-    state = jax.block_until_ready(roll(state))
-    times.append(time.perf_counter() - t0)
+  state, compile_s, times = timed(advance, state, nstep)
   d = state[0] if damage else state
   z = np.asarray(d.xpos[:, 2:, 2])  # box heights (bodies after world and pusher)
   extra = {"damage": True, "min_health": float(jnp.min(state[1].link_health))} if damage else {}
@@ -152,15 +160,7 @@ def measure_task(name: str, backend: str, envs: int, nstep: int, robot: str) -> 
   env = tasks.make(name, **kw)
   state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), envs))
   act = jnp.zeros((envs, env.action_size))
-  roll = jax.jit(lambda s: jax.lax.fori_loop(0, nstep, lambda _, x: jax.vmap(env.step)(x, act), s))
-  t0 = time.perf_counter()
-  state = jax.block_until_ready(roll(state))
-  compile_s = time.perf_counter() - t0
-  times = []
-  for _ in range(2):
-    t0 = time.perf_counter()
-    state = jax.block_until_ready(roll(state))
-    times.append(time.perf_counter() - t0)
+  state, compile_s, times = timed(lambda x: jax.vmap(env.step)(x, act), state, nstep)
   n_sub = env.unwrapped.n_substeps
   return {"task": name, "backend": backend, "robot": robot, "envs": envs, "steps": nstep, "n_substeps": n_sub,
           "compile_and_first_s": compile_s, "seconds": min(times), "env_steps_per_s": envs * nstep / min(times),
