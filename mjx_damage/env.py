@@ -70,7 +70,7 @@ class DamageEnv(Env):
     return "mjx"
 
   def make_data(self) -> mjx.Data:
-    """A fresh ``mjx.Data`` of ONE environment (vmap it; with Warp, over exactly ``warp_worlds`` environments).
+    """A fresh ``mjx.Data`` of ONE environment (vmap it; with Warp, over at most ``warp_worlds`` environments).
 
     Warp's contact buffer is shared by the batch: ``warp_contacts`` places per world, and its constraint rows
     per world sized for them (4 pyramid rows per condim-3 contact, plus equality and limit rows).

@@ -35,6 +35,7 @@ import importlib
 import inspect
 import json
 
+from mjx_damage.env import WARP_CONTACTS
 from mjx_damage.wrapper import DamageWrapper
 from tasks import robots
 
@@ -168,7 +169,7 @@ def default_config(name: str) -> dict:
 
 # make() keywords of the physics backend (mjx_damage.env.DamageEnv): "jax", or "warp" (MuJoCo Warp) stepping
 # num_envs environments at once (the batch the env is vmapped over) with warp_contacts contact places each
-_BACKEND_OPTIONS = {"backend": "jax", "num_envs": 0, "warp_contacts": 32}
+_BACKEND_OPTIONS = {"backend": "jax", "num_envs": 0, "warp_contacts": WARP_CONTACTS}
 
 
 def make(name: str, **overrides):
