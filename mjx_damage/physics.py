@@ -38,6 +38,10 @@ class DamageState:
   link_vel:    f32[L, 3] link COM velocities at the end of the last evaluation, m/s
   thermal:     temperature-model state (heat source temperatures), or None
   liquid:      liquid-model state (particles), or None
+  contacts_dropped: i32[] contacts of this environment the backend could not read for damage in the last
+               control step (the most in any substep): MuJoCo Warp's fixed places per world
+               (:mod:`mjx_damage.warp_step`), at least 1 where Warp's own buffers overflowed; always 0 on
+               MJX-JAX, which reads every contact slot
   """
 
   link_health: jax.Array
@@ -50,6 +54,7 @@ class DamageState:
   link_vel: jax.Array
   thermal: object = None
   liquid: object = None
+  contacts_dropped: object = None
 
 
 def init_state(binding: Binding, params: DamageParams | None = None, rng: jax.Array | None = None) -> DamageState:
@@ -71,13 +76,15 @@ def init_state(binding: Binding, params: DamageParams | None = None, rng: jax.Ar
       link_vel=jnp.zeros((L, 3), jnp.float32),
       thermal=T.init(binding),
       liquid=Lq.init(binding, rng),
+      contacts_dropped=jnp.zeros((), jnp.int32),
   )
 
 
 def begin_step(ds: DamageState) -> DamageState:
   """Zero the per-env-step accumulators (call once per control step)."""
   z = jnp.zeros_like(ds.f_par)
-  return ds.replace(step_damage=Damage(z, z, z), f_par=z, f_perp=z)
+  ds = ds.replace(step_damage=Damage(z, z, z), f_par=z, f_perp=z)
+  return ds if ds.contacts_dropped is None else ds.replace(contacts_dropped=jnp.zeros_like(ds.contacts_dropped))
 
 
 def apply_signals(ds: DamageState, signals: LinkSignals, dt) -> DamageState:

@@ -44,7 +44,9 @@ def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, slots:
   ds = jax.vmap(lambda x, s: Lq.advance(m, binding, x, s, dt))(pub, ds)
   signals = mjx_warp.link_signals(binding, d, wc, qvel, ds.temperature, ds.exposure)
   ds = jax.vmap(lambda s, g: apply_signals(s, g, dt))(ds, signals)
-  return d, ds.replace(link_vel=mjx_warp.link_velocities(binding, d)), wc.overflow
+  # a world whose contacts or constraint rows overflowed Warp's own buffers lost some uncounted: at least one
+  lost = jax.numpy.maximum(wc.overflow, (d._impl.overflow != 0).astype(jax.numpy.int32))
+  return d, ds.replace(link_vel=mjx_warp.link_velocities(binding, d)), lost
 
 
 def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substeps: int = 1, slots: int = 16):
@@ -58,7 +60,8 @@ def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substep
 
   Returns:
     ``(d, ds, overflow)``: overflow i32[B] the most contacts a world had beyond ``slots`` in any substep
-    (their forces were not counted).
+    (their forces were not counted), at least 1 where Warp's own buffers overflowed (``d._impl.overflow``:
+    contacts or constraint rows lost that Warp does not count); also ``ds.contacts_dropped``.
   """
   ds = jax.vmap(begin_step)(ds)
 
@@ -69,6 +72,8 @@ def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substep
 
   worst = jax.numpy.zeros((d.qpos.shape[0],), jax.numpy.int32)
   (d, ds, worst), _ = jax.lax.scan(body, (d, ds, worst), None, length=n_substeps)
+  if ds.contacts_dropped is not None:  # the env's record of it (DamageState.contacts_dropped)
+    ds = ds.replace(contacts_dropped=worst)
   return d, ds, worst
 
 

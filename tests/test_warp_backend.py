@@ -218,3 +218,15 @@ def test_warp_scaling_times_a_task_step_on_both_backends(capsys):
   for backend in ("jax", "warp"):
     row = W.measure_task("place_plate", backend, 2, 2, "gripper")
     assert row["backend"] == backend and row["finite"] and row["env_steps_per_s"] > 0 and row["n_substeps"] == 6
+
+
+def test_contacts_the_warp_env_cannot_read_are_recorded_in_its_damage_state():
+  """DamageState.contacts_dropped: 0 on MJX-JAX; on Warp, the contacts beyond warp_contacts places per world, or
+  1 where the world's contacts did not fit in Warp's shared buffer (2 envs × 1 place: one world takes both)."""
+  for kw, dropped in (({}, False), ({"backend": "warp", "num_envs": 2, "warp_contacts": 1}, True)):
+    env = tasks.make("place_plate", robot="gripper", obs_mode="paper", **kw)
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 2))
+    assert (np.asarray(state.info["damage_state"].contacts_dropped) == 0).all()
+    state = jax.jit(jax.vmap(env.step))(state, jnp.zeros((2, env.action_size)))
+    got = np.asarray(state.info["damage_state"].contacts_dropped)
+    assert ((got > 0) if dropped else (got == 0)).all(), got
