@@ -142,19 +142,18 @@ def test_shelve_item_start_knob():
     with pytest.raises(ValueError, match="start"):
       tasks.make("shelve_item", start=bad)
   assert tasks.default_config("shelve_item")["start"] == "in_front"
-  for k in range(4):
-    rng = jax.random.PRNGKey(k)
-    boxes = {}
-    for start in ("in_front", "above_glass"):
-      env = tasks.make("shelve_item", start=start)
-      task = env.unwrapped
-      d = env.reset(rng).pipeline_state
-      boxes[start] = np.asarray(task.pos(d, "cereal_box"))
-      glass = np.asarray(task.pos(d, "wineglass"))
-    bottom = boxes["above_glass"][2] - S.BOX_HALF[2]
-    assert S.GLASS_TOP + 0.029 < bottom < S.GLASS_TOP + 0.071
-    assert boxes["above_glass"][0] + S.BOX_HALF[0] < glass[0] - S.GLASS_HALF[0]  # in front of the glass
-    assert boxes["in_front"][2] - S.BOX_HALF[2] < S.GLASS_TOP  # the default start: below the glass's top
+  rngs = jax.random.split(jax.random.PRNGKey(3), 8)
+  boxes = {}
+  for start in ("in_front", "above_glass"):
+    env = tasks.make("shelve_item", start=start)
+    task = env.unwrapped
+    d = jax.jit(jax.vmap(env.reset))(rngs).pipeline_state
+    boxes[start] = np.asarray(jax.vmap(lambda x: task.pos(x, "cereal_box"))(d))
+    glass = np.asarray(jax.vmap(lambda x: task.pos(x, "wineglass"))(d))
+  bottom = boxes["above_glass"][:, 2] - S.BOX_HALF[2]
+  assert ((S.GLASS_TOP + 0.029 < bottom) & (bottom < S.GLASS_TOP + 0.071)).all()
+  assert (boxes["above_glass"][:, 0] + S.BOX_HALF[0] < glass[:, 0] - S.GLASS_HALF[0]).all()  # in front of the glass
+  assert (boxes["in_front"][:, 2] - S.BOX_HALF[2] < S.GLASS_TOP).all()  # the default start: below the glass's top
 
 
 def test_shelve_item_distance_knob():
