@@ -83,8 +83,8 @@ def init_state(binding: Binding, params: DamageParams | None = None, rng: jax.Ar
 def begin_step(ds: DamageState) -> DamageState:
   """Zero the per-env-step accumulators (call once per control step)."""
   z = jnp.zeros_like(ds.f_par)
-  ds = ds.replace(step_damage=Damage(z, z, z), f_par=z, f_perp=z)
-  return ds if ds.contacts_dropped is None else ds.replace(contacts_dropped=jnp.zeros_like(ds.contacts_dropped))
+  return ds.replace(step_damage=Damage(z, z, z), f_par=z, f_perp=z,
+                    contacts_dropped=jnp.zeros_like(ds.contacts_dropped))
 
 
 def apply_signals(ds: DamageState, signals: LinkSignals, dt) -> DamageState:

@@ -18,6 +18,8 @@ before it); what they are computed from is the same.
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
+from jax import custom_batching
 from mujoco import mjx
 
 from mjx_damage import liquid as Lq
@@ -45,7 +47,7 @@ def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, slots:
   signals = mjx_warp.link_signals(binding, d, wc, qvel, ds.temperature, ds.exposure)
   ds = jax.vmap(lambda s, g: apply_signals(s, g, dt))(ds, signals)
   # a world whose contacts or constraint rows overflowed Warp's own buffers lost some uncounted: at least one
-  lost = jax.numpy.maximum(wc.overflow, (d._impl.overflow != 0).astype(jax.numpy.int32))
+  lost = jnp.maximum(wc.overflow, (d._impl.overflow != 0).astype(jnp.int32))
   return d, ds.replace(link_vel=mjx_warp.link_velocities(binding, d)), lost
 
 
@@ -68,13 +70,11 @@ def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substep
   def body(carry, _):
     d, ds, worst = carry
     d, ds, over = substep(m, binding, d, ds, slots)
-    return (d, ds, jax.numpy.maximum(worst, over)), None
+    return (d, ds, jnp.maximum(worst, over)), None
 
-  worst = jax.numpy.zeros((d.qpos.shape[0],), jax.numpy.int32)
+  worst = jnp.zeros((d.qpos.shape[0],), jnp.int32)
   (d, ds, worst), _ = jax.lax.scan(body, (d, ds, worst), None, length=n_substeps)
-  if ds.contacts_dropped is not None:  # the env's record of it (DamageState.contacts_dropped)
-    ds = ds.replace(contacts_dropped=worst)
-  return d, ds, worst
+  return d, ds.replace(contacts_dropped=worst), worst
 
 
 def check_supported(binding: Binding) -> None:
@@ -95,7 +95,7 @@ def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
   Called on one environment it runs as a batch of one. One level of vmap: the batch is the worlds that
   ``mjx.make_data(..., impl="warp", naconmax=…)`` was vmapped over.
   """
-  from jax import custom_batching
+  # not at the top: mujoco.mjx.warp.ffi imports warp-lang, an optional extra that only this backend needs
   from mujoco.mjx.warp import ffi as warp_ffi
   from mujoco.mjx.warp import types as warp_types
 
@@ -114,8 +114,8 @@ def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
     bd, bds = in_batched
     # a public field or damage leaf the same for every world (e.g. one ctrl for all) gets the batch axis
     d = jax.tree.map_with_path(
-        lambda p, x, b: x if (b or _is_impl(p)) else jax.numpy.broadcast_to(x, (axis_size,) + x.shape), d, bd)
-    ds = jax.tree.map(lambda x, b: x if b else jax.numpy.broadcast_to(x, (axis_size,) + x.shape), ds, bds)
+        lambda p, x, b: x if (b or _is_impl(p)) else jnp.broadcast_to(x, (axis_size,) + x.shape), d, bd)
+    ds = jax.tree.map(lambda x, b: x if b else jnp.broadcast_to(x, (axis_size,) + x.shape), ds, bds)
     d2, ds2, _ = step(m, binding, d, ds, n_substeps, slots)
     out_d = jax.tree.map_with_path(lambda p, x, b: b if _is_impl(p) else True, d2, bd)
     return (d2, ds2), (out_d, jax.tree.map(lambda _: True, ds2))
