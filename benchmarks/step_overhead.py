@@ -3,10 +3,15 @@
 For each task (``tasks.make(name)``, the damage wrapper included) and one batch
 size, every variant is one ``jit`` of a ``lax.scan`` over ``--steps`` control
 steps of ``vmap(step)``, compiled ahead of time and timed after one warm-up call
-(best of ``--repeats``). Variants:
+(best of ``--repeats``), every timed call from the state the warm-up call ended in (so all
+repeats time the same physics: MJX's solver loop, vmapped, runs until every env has
+converged, so the cost of a step follows what the batch is doing). Variants:
 
 * ``task``          — policy + ``env.step`` (what training runs);
-* ``zeros_policy``  — ``env.step`` with zero actions (the policy's cost is the difference);
+* ``zeros_policy``  — ``env.step`` with zero actions (the robot then stays put: other physics);
+* ``no_policy``     — ``env.step`` from the ``task`` variant's timed start with the very actions its
+                      policy chose there (recorded from one run of it): the task step, same physics,
+                      without the policy's forward pass and sampling;
 * ``no_wrapper``    — the bare task's step (``env.unwrapped``) with the policy: the damage
                       wrapper's bookkeeping (health summaries, episode stats, reset masks);
 * ``no_liquid``     — the task step with the liquid model not advanced (tasks with liquid);
@@ -19,8 +24,8 @@ steps of ``vmap(step)``, compiled ahead of time and timed after one warm-up call
 * ``raw_moving``    — the same with the controls the task's ``robot.ctrl`` makes of uniform
                       random actions each step: MJX's solver stops early once every env has
                       converged, so a moving robot can cost more physics than one at rest.
-* ``raw_replay``    — ``n_substeps × mjx.step`` from the same reset states, replaying the very
-                      controls the ``task`` variant applied (recorded from one run of it): the
+* ``raw_replay``    — ``n_substeps × mjx.step`` from the ``task`` variant's timed start, replaying the
+                      very controls that variant applies from there (recorded from one run of it): the
                       same physics the task step does, with nothing else. ``task`` over
                       ``raw_replay`` is the share of the step that is physics.
 
@@ -61,8 +66,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))  # the repo's packages, wherever this is run from
 
-VARIANTS = ("task", "zeros_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage", "raw",
-            "raw_moving", "raw_replay")
+VARIANTS = ("task", "zeros_policy", "no_policy", "no_wrapper", "no_liquid", "no_pairs", "no_temperature", "no_damage",
+            "raw", "raw_moving", "raw_replay")
 POLICIES = ("mlp", "zeros", "scripted")
 ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may differ
 
@@ -122,16 +127,36 @@ def _policy_rollout(stepper, policy, carry, steps: int, record=lambda s: None):
   return jax.lax.scan(body, carry, None, length=steps)
 
 
-def _task_controls(env, policy, state, steps: int):
-  """The controls (``d.ctrl`` after each step, f32[steps, envs, nu]) of ``steps`` task steps from ``state``.
+def _task_controls(env, policy, state, steps: int, key=None):
+  """The controls (``d.ctrl`` after each step, f32[steps, envs, nu]) of ``steps`` task steps from ``state``
+  with the rollout key ``key`` (default ``PRNGKey(1)``).
 
-  The same keys as the ``task`` variant's first timed call, so ``raw_replay`` steps the
-  physics that variant's policy drove."""
+  Given the ``task`` variant's timed start (state and key), ``raw_replay`` steps the very physics
+  that variant's policy drove."""
   import jax
 
-  rollout = lambda s: _policy_rollout(env, policy, (s, jax.random.PRNGKey(1)), steps,  # noqa: E731
-                                      lambda s: s.pipeline_state.ctrl)[1]
-  return jax.jit(rollout)(state)
+  key = jax.random.PRNGKey(1) if key is None else key
+  rollout = lambda s, k: _policy_rollout(env, policy, (s, k), steps,  # noqa: E731
+                                         lambda s: s.pipeline_state.ctrl)[1]
+  return jax.jit(rollout)(state, key)
+
+
+def _task_actions(env, policy, carry, steps: int):
+  """The actions (f32[steps, envs, A]) the policy picks in ``steps`` task steps from ``carry`` = (state, key),
+  drawn as :func:`_policy_rollout` draws them: ``no_policy`` steps them without the policy."""
+  import jax
+
+  envs = carry[0].obs.shape[0]
+
+  def chosen(c):
+    def body(c, _):
+      s, k = c
+      k, kp = jax.random.split(k)
+      a = jax.vmap(policy)(s, jax.random.split(kp, envs))
+      return (jax.vmap(env.step)(s, a), k), a
+    return jax.lax.scan(body, c, None, length=steps)[1]
+
+  return jax.jit(chosen)(carry)
 
 
 def applicable(task, variant: str) -> bool:
@@ -162,6 +187,10 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
   keys = jax.random.split(jax.random.PRNGKey(0), envs)
   state = jax.jit(jax.vmap(stepper.reset))(keys)
 
+  # Every timed call starts from the same state: the one after this variant's warm-up call (for
+  # raw_replay, after a warm-up call of the task rollout). Calls that continued from the last one timed
+  # later and later parts of the episode, and raw_replay (controls recorded from the reset state)
+  # then stepped other physics than the task call it was compared with.
   if variant in ("raw", "raw_moving"):
     n, moving = task.n_substeps, variant == "raw_moving"
 
@@ -179,9 +208,20 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
       return jax.lax.scan(body, carry, None, length=steps)[0]
 
     carry = (state.pipeline_state, jax.random.PRNGKey(1))
+  elif variant == "no_policy":
+    warm = jax.jit(lambda c: _policy_rollout(env, policy, c, steps)[0])((state, jax.random.PRNGKey(1)))
+    actions = _task_actions(env, policy, warm, steps)  # what the policy picks from the task's timed start
+
+    def run(carry):
+      s, actions = carry
+      return jax.lax.scan(lambda s, a: (jax.vmap(env.step)(s, a), None), s, actions)[0], actions
+
+    carry = (warm[0], actions)
   elif variant == "raw_replay":
     n = task.n_substeps
-    ctrls = _task_controls(env, policy, state, steps)  # f32[steps, envs, nu], what `task` applied
+    warm = jax.jit(lambda c: _policy_rollout(env, policy, c, steps)[0])(
+        (state, jax.random.PRNGKey(1)))  # the task variant's timed start
+    ctrls = _task_controls(env, policy, warm[0], steps, warm[1])  # f32[steps, envs, nu], what `task` applies from there
 
     def run(carry):
       def body(d, ctrl):
@@ -189,7 +229,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
       d, ctrls = carry
       return jax.lax.scan(body, d, ctrls)[0], ctrls
 
-    carry = (state.pipeline_state, ctrls)
+    carry = (warm[0].pipeline_state, ctrls)
   else:
     def run(carry):
       return _policy_rollout(stepper, policy, carry, steps)[0]
@@ -197,19 +237,23 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
     carry = (state, jax.random.PRNGKey(1))
   hits = CACHE_HITS[0]
   t0 = time.perf_counter()
-  compiled = jax.jit(run, donate_argnums=0).lower(carry).compile()
+  compiled = jax.jit(run).lower(carry).compile()
   compile_s = time.perf_counter() - t0
   from_cache = CACHE_HITS[0] > hits
   if compile_only:
     print(f"{name:12s} {variant:15s} compiled in {compile_s:.0f} s", flush=True)
     return None
-  carry = jax.block_until_ready(compiled(carry))  # warm-up
-  best = float("inf")
+  if variant in ("raw_replay", "no_policy"):
+    jax.block_until_ready(compiled(carry))  # warm-up (its start already is the task's timed start)
+  else:
+    carry = jax.block_until_ready(compiled(carry))  # warm-up; every timed call starts here
+  best, out = float("inf"), None
   for _ in range(repeats):
     t0 = clock()
-    carry = jax.block_until_ready(compiled(carry))
+    out = jax.block_until_ready(compiled(carry))
     best = min(best, clock() - t0)
-  d = carry[0] if variant.startswith("raw") else carry[0].pipeline_state
+  last = out[0]
+  d = last if variant.startswith("raw") else last.pipeline_state
   row = {
       "task": name, "robot": robot, "variant": variant, "envs": envs, "steps": steps,
       "env_steps_per_s": envs * steps / best, "wall_s": best, "compile_s": compile_s, "from_cache": from_cache,

@@ -93,3 +93,23 @@ def test_raw_replay_steps_the_physics_the_task_step_did():
   got = jax.jit(replay_qpos)(state.pipeline_state)
   assert float(np.abs(np.asarray(ctrls[1:]) - np.asarray(ctrls[:-1])).max()) > 1e-4  # the controls move
   np.testing.assert_allclose(got, want, atol=1e-5)
+
+
+def test_no_policy_steps_the_actions_the_task_policy_chose():
+  """``no_policy`` replays the recorded actions through ``env.step``: the same rollout as the ``task`` variant
+  (policy and all) from the same start, so the two time the same physics and the difference is the policy."""
+  import jax
+  import numpy as np
+
+  import tasks
+
+  env = tasks.make("pick_egg")
+  policy = so.make_policy(env, "mlp")
+  state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 4))
+  carry = (state, jax.random.PRNGKey(3))
+  actions = so._task_actions(env, policy, carry, 3)
+
+  want = jax.jit(lambda c: so._policy_rollout(env, policy, c, 3, lambda s: s.pipeline_state.qpos)[1])(carry)
+  got = jax.jit(lambda s: jax.lax.scan(lambda s, a: (jax.vmap(env.step)(s, a),) * 2, s, actions)[1])(state)
+  assert float(np.abs(np.asarray(actions[1:]) - np.asarray(actions[:-1])).max()) > 1e-4  # the policy acts
+  np.testing.assert_allclose(got.pipeline_state.qpos, want, atol=1e-6)
