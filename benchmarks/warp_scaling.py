@@ -28,16 +28,18 @@ Usage, with warp-lang importable::
 
     python benchmarks/warp_scaling.py --envs 8192 --out $OUT/warp_scaling_gpu.json
 
-How the committed H100 result was run (the device tool carries at most 64 MiB a
-call and keeps a machine for 30 s between calls): here, unpack the cp312 wheels
-of mujoco and mujoco-mjx 3.17.0 and warp-lang 1.19.0 (py3 manylinux_2_28) into
-one folder, ``tar | xz -6`` it (122 MB) and split it in two halves ``.wpa/p`` and
-``.wpb/p`` (git-ignored). Call 1 carries ``.wpa`` and copies it to ``/tmp/pa``;
-call 2 carries the small wheels (trimesh, brax and their pure-Python needs) to
-``/tmp/wpc``; call 3 carries ``.wpb`` and runs::
+How the GPU results were run (the device tool sends at most 64 MiB a call, the repo's
+working tree included, and keeps a machine for 30 s between calls): here, unpack the
+warp-lang 1.19.0 wheel (py3 manylinux_2_28), drop ``warp/bin/warp-clang.so`` (Warp's CPU
+compiler, loaded only if present; the GPU path does not need it), ``warp/examples`` and
+``warp/tests``, ``tar | xz -9`` the rest (76 MiB) and split it into a 44 MiB part ``.wpa/p``
+and the rest ``.wpb/p`` (git-ignored). Call 1 carries ``.wpa`` and copies it to ``/tmp/pa``;
+call 2 carries ``.wpb`` (with the small wheels: brax, trimesh and their pure-Python needs, in
+``.wpb/whl``) and joins the parts into ``/tmp/w.tar.xz``; call 3 carries the mujoco and
+mujoco-mjx 3.17.0 wheels (cp312) in ``.wpc`` and runs::
 
-    cat /tmp/pa .wpb/p | xz -d | tar -x -C /tmp/site
-    python3 -m pip install -q --no-index --no-deps --target /tmp/site /tmp/wpc/*.whl
+    python3 -m pip install -q --no-index --no-deps --target /tmp/site /tmp/wpc/*.whl .wpc/*.whl
+    xz -d < /tmp/w.tar.xz | tar -x -C /tmp/site
     PYTHONPATH=/tmp/site:$PWD python3 benchmarks/warp_scaling.py --envs 8192 --out $OUT/warp_scaling_gpu.json
 """
 
