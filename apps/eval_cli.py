@@ -28,7 +28,7 @@ def build_parser() -> Parser:
   ap = Parser(prog="mjx-damage eval", description="Evaluate a policy on a task for N episodes.")
   R.add_task_policy_arguments(ap)
   R.add_task_override_arguments(ap)
-  R.add_backend_argument(ap, default="auto")
+  R.add_backend_argument(ap, default="auto", warp=True)
   ap.add_argument("--native-envs", type=int, default=256,
                   help="native backend: episodes stepped at once (at most --episodes)")
   ap.add_argument("--episodes", type=int, default=64)
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
   args = ap.parse_args(argv)
   try:  # everything the user gave is checked before a task is built or compiled
     R.check_task(args.task)
-    R.check_backend(args.backend)
+    R.check_backend(args.backend, warp=True)
     if args.native_envs < 1:
       raise ValueError(f"native_envs: must be >= 1, got {args.native_envs}")
     R.parse_policy_spec(args.policy)
@@ -59,7 +59,9 @@ def main(argv=None) -> int:
       outputs.check_new([args.out], "--out", args.overwrite)
     out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
     overrides = R.task_overrides(args.task, R.policy_task_kwargs(args.policy, args.task), args.robot, args.task_arg)
-    env = R.make_task(args.task, **overrides)
+    # --backend warp: the task is made on MuJoCo Warp, every episode of the call in its one batch
+    warp_kw = R.warp_overrides(args.task, args.backend, args.episodes, len(jax.devices()))
+    env = R.make_task(args.task, **overrides, **warp_kw)
     policy = R.make_policy(args.policy, env)
     backend = R.pick_backend(args.backend, env)
     env = R.on_backend(env, backend, min(args.native_envs, args.episodes))
@@ -74,7 +76,8 @@ def main(argv=None) -> int:
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
-  program = R.program_description("eval", args.task, args.policy, backend=backend)
+  # MuJoCo Warp's kernels are FFI calls, which jax.export cannot store: a Warp run keeps no traced program
+  program = None if backend == "warp" else R.program_description("eval", args.task, args.policy, backend=backend)
   with heartbeat("eval"):
     res = E.evaluate(env, policy, args.episodes, args.seed, fragility=args.fragility,
                      episode_length=episode_length, safe_threshold=args.safe_threshold,

@@ -29,7 +29,7 @@ from tasks.drop import DropEnv
 from train import checkpoint as ckpt
 from train import evaluate as E
 
-BACKENDS = ("auto", "mjx", "native")
+BACKENDS = ("auto", "mjx", "native")  # every command; eval also takes "warp" (warp_overrides)
 POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint[+sample|+mean]:PATH")
 # A trained policy's action (train.networks.policy_apply): its mode (brax's deterministic policy), one sample per
 # step (the stochastic policy PPO trains), or the squashed mean.
@@ -60,21 +60,43 @@ def make_task(name: str, **overrides):
   return DamageWrapper(table_env(**{"k": 4, **overrides}))
 
 
-def check_backend(name) -> str:
-  if name not in BACKENDS:
-    raise ValueError(f"backend: unknown backend {name!r}; backends: {', '.join(BACKENDS)}")
+def check_backend(name, warp: bool = False) -> str:
+  """``name`` if the command takes it (``warp``: the command runs MuJoCo Warp too), else ValueError."""
+  valid = BACKENDS + (("warp",) if warp else ())
+  if name not in valid:
+    raise ValueError(f"backend: unknown backend {name!r}; backends: {', '.join(valid)}")
   return name
 
 
+def warp_overrides(task: str, backend: str, num_envs: int, num_devices: int = 1) -> dict:
+  """The make() keywords that put registry task ``task`` on MuJoCo Warp for ``--backend warp`` (``{}`` for
+  any other backend): ``num_envs`` environments stepped as one batch.
+
+  Checked before anything is built: a registry task (the built-in scenes have no Warp path), one device
+  (the batch is one list of contacts on one device), and warp-lang installed (the ``warp`` extra)."""
+  if backend != "warp":
+    return {}
+  if task not in tasks.names():
+    raise ValueError(f"backend: warp runs the registry's tasks; {task!r} is a built-in scene (use mjx or native)")
+  if num_devices != 1:
+    raise ValueError(f"backend: warp steps one batch on one device; this run has {num_devices} (use mjx, or one device)")
+  try:
+    import warp  # noqa: F401  (the optional extra MJX's Warp implementation needs)
+  except ImportError:
+    raise ValueError("backend: warp needs warp-lang, the optional extra: pip install -e '.[warp]'") from None
+  return {"backend": "warp", "num_envs": int(num_envs)}
+
+
 def pick_backend(backend: str, env, num_devices: int = 1) -> str:
-  """``mjx`` or ``native`` for ``--backend``: ``auto`` is whichever is faster for ``env``.
+  """``mjx``, ``native`` or ``warp`` for ``--backend``: ``auto`` is whichever of mjx and native is faster
+  for ``env``; ``warp`` (an env made with :func:`warp_overrides`) stays as it is.
 
   That is native on a CPU run over one device whose scene the native backend runs (about 10x the
   MJX-JAX env-steps/s on 2 cores, 1.3x with liquid, whose particles run in JAX on either:
   benchmarks/results/native_backend_cpu.md, native_backend_cpu_pour_water.md, and with heat sources
   native_backend_cpu_add_firewood.md), else mjx (accelerators, several devices). The two agree on completion and safe completion;
   health and cost can differ (README, "Native batched backend")."""
-  if check_backend(backend) != "auto":
+  if check_backend(backend, warp=True) != "auto":
     return backend
   cpu_only = jax.default_backend() == "cpu"
   return "native" if cpu_only and num_devices == 1 and tasks.native.supports(env) else "mjx"
@@ -86,18 +108,20 @@ def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
 
   Raises ValueError for an env the native backend cannot run (not a task-suite, drop or K-box scene).
   """
-  if pick_backend(backend, env) == "mjx":
+  if pick_backend(backend, env) in ("mjx", "warp"):  # a Warp env was made so (warp_overrides)
     return env
   return tasks.native.wrap(env, num_envs, nthread=nthread)
 
 
-def add_backend_argument(ap, scope: str = "", default: str = "mjx") -> None:
-  """``--backend auto|mjx|native`` as every command spells it; ``scope`` adds what the choice applies to
-  (bench: only its task throughput), so the one help text says where it does not."""
+def add_backend_argument(ap, scope: str = "", default: str = "mjx", warp: bool = False) -> None:
+  """``--backend auto|mjx|native[|warp]`` as every command spells it; ``scope`` adds what the choice applies to
+  (bench: only its task throughput), so the one help text says where it does not; ``warp``: the command
+  also runs MuJoCo Warp (:func:`warp_overrides`)."""
   ap.add_argument("--backend", default=default,
                   help=f"physics (default {default}): mjx (compiled MJX-JAX, batched on any device), native "
-                       "(MuJoCo on C threads, CPU) or auto (native on a one-device CPU "
-                       "run where the scene allows, else mjx)" + (f"; {scope}" if scope else ""))
+                       "(MuJoCo on C threads, CPU), auto (native on a one-device CPU "
+                       "run where the scene allows, else mjx)" + (f"; {scope}" if scope else "")
+                       + (", or warp (MuJoCo Warp, one device; the warp extra)" if warp else ""))
 
 
 def episode_length_of(env, task: Optional[str] = None) -> int:

@@ -72,7 +72,9 @@ def footprint(env) -> Footprint:
   """
   base = getattr(env, "unwrapped", env)
   if hasattr(base, "sys") and hasattr(base, "init_damage"):
-    data = jax.eval_shape(lambda: mjx.make_data(base.sys))
+    # DamageEnv.make_data: the data of its physics backend (MuJoCo Warp's differs from MJX-JAX's)
+    make = getattr(base, "make_data", None) or (lambda: mjx.make_data(base.sys))
+    data = jax.eval_shape(make)
     ds = jax.eval_shape(base.init_damage, jax.random.PRNGKey(0))
     liquid = getattr(ds, "liquid", None)
     particles = 0 if liquid is None else int(liquid.pos.shape[0])
