@@ -9,7 +9,9 @@
 * ``damage`` — {"mechanical", "thermal", "fluid"} totals this step, f32[] each,
 * ``task_reward`` f32[] — the wrapped env's reward before shaping,
 * ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7) plus
-  ``action_sanitised``, the episode's count of sanitised action entries,
+  ``action_sanitised``, the episode's count of sanitised action entries, and
+  ``contacts_dropped``, the most contacts one of its steps could not read for damage
+  (``DamageState.contacts_dropped``: MuJoCo Warp's places per world; 0 on MJX-JAX),
 
 and ``metrics["action_sanitised"]`` f32[] (action entries sanitised this step);
 it shapes ``reward ← reward − weight·cost``, optionally appends entity health
@@ -95,7 +97,8 @@ def sanitise_action(action: jax.Array, lo: float = -1.0, hi: float = 1.0) -> tup
 
 def _zero_episode():
   z = jnp.zeros((), jnp.float32)
-  return {"completed": z, "cost": z, "length": z, "damaged": z, "action_sanitised": z, "physics_diverged": z}
+  return {"completed": z, "cost": z, "length": z, "damaged": z, "action_sanitised": z, "physics_diverged": z,
+          "contacts_dropped": z}
 
 
 def _all_finite(tree) -> jax.Array:
@@ -247,6 +250,9 @@ class DamageWrapper(Wrapper):
         "damaged": jnp.maximum(episode["damaged"], (cost > 0).astype(jnp.float32)),
         "action_sanitised": episode["action_sanitised"] + sanitised,
         "physics_diverged": episode["physics_diverged"] + diverged,
+        # the most contacts one control step could not read for damage (MuJoCo Warp's places per world)
+        "contacts_dropped": jnp.maximum(episode["contacts_dropped"],
+                                        jnp.asarray(ds.contacts_dropped, jnp.float32)),
     }
     reward = task_reward - self.weight * cost
     done = jnp.maximum(nstate.done, diverged.astype(nstate.done.dtype))

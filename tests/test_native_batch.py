@@ -121,10 +121,10 @@ def test_bad_input(drop):
 
 def test_cli_rejects_a_bad_backend_before_building(capsys):
   with pytest.raises(SystemExit) as e:
-    eval_cli.main(["--task", "place_plate", "--policy", "scripted:safe", "--backend", "warp"])
+    eval_cli.main(["--task", "place_plate", "--policy", "scripted:safe", "--backend", "mujoco"])
   assert e.value.code == 2
   err = capsys.readouterr().err.strip()
-  assert err.count("\n") == 0 and "backend: unknown backend 'warp'" in err
+  assert err.count("\n") == 0 and "backend: unknown backend 'mujoco'" in err
 
 
 def test_native_evaluator_runs_the_episodes_step_by_step(drop):
@@ -194,8 +194,9 @@ def test_auto_backend_picks_native_on_a_one_device_cpu_run_where_the_scene_allow
   assert R.pick_backend("auto", fire) == "native"
   assert R.pick_backend("auto", place, num_devices=2) == "mjx"  # native steps on one host, no sharding
   assert R.pick_backend("mjx", place) == "mjx" and R.pick_backend("native", place) == "native"
+  assert R.pick_backend("warp", place) == "warp"  # an env eval made on Warp (R.warp_overrides) stays there
   with pytest.raises(ValueError, match="backend: unknown backend"):
-    R.pick_backend("warp", place)
+    R.pick_backend("mujoco", place)
 
 
 def test_eval_defaults_to_auto_and_records_the_backend_it_used(tmp_path, capsys):

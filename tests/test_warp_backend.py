@@ -250,3 +250,16 @@ def test_eval_cli_runs_a_task_on_warp(tmp_path):
   assert res["safe"]["backend"] == "warp" and res["safe"]["backend_requested"] == "warp"
   assert res["safe"]["metrics"]["completion"] == 1.0 and res["safe"]["metrics"]["safe_completion"] == 1.0
   assert res["unsafe"]["metrics"]["completion"] == 1.0 and res["unsafe"]["metrics"]["safe_completion"] == 0.0
+
+
+def test_the_evaluator_counts_episodes_with_contacts_it_could_not_read():
+  """A Warp env with too few contact places per world: the wrapper keeps each episode's worst step in
+  ``damage_episode["contacts_dropped"]`` and the evaluator counts those episodes (0 on MJX-JAX)."""
+  from train import evaluate as E
+
+  res = {}
+  for kw in ({"backend": "warp", "num_envs": 2, "warp_contacts": 1}, {}):
+    env = tasks.make("place_plate", robot="gripper", **kw)
+    res[kw.get("backend", "jax")] = E.evaluate(env, tasks.scripted_policy(env, "safe"), 2, episode_length=20)["metrics"]
+  assert res["warp"]["contacts_dropped_episodes"] == 2
+  assert res["jax"]["contacts_dropped_episodes"] == 0

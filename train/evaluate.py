@@ -163,6 +163,7 @@ def summary(state) -> dict:
       "entity_health": state.info["entity_health"],
       "success_final": state.metrics.get("success", ep["completed"] * 0.0),
       "physics_diverged": ep.get("physics_diverged", ep["completed"] * 0.0),
+      "contacts_dropped": ep.get("contacts_dropped", ep["completed"] * 0.0),
   }
 
 
@@ -363,6 +364,8 @@ def metrics(per_episode: dict, entity_names: Sequence[str], safe_threshold: floa
     out["task_return"] = float(np.mean(per_episode["task_return"], dtype=np.float64))
   if "physics_diverged" in per_episode:  # episodes the damage wrapper ended on a non-finite physics step
     out["diverged_episodes"] = int(np.sum(np.asarray(per_episode["physics_diverged"]) > 0))
+  if "contacts_dropped" in per_episode:  # episodes with contacts the backend could not read (Warp's places)
+    out["contacts_dropped_episodes"] = int(np.sum(np.asarray(per_episode["contacts_dropped"]) > 0))
   return out
 
 
@@ -483,6 +486,8 @@ def format_table(m: dict, title: str = "") -> str:
   rows += [("mean episode length (steps)", f"{m['mean_length']:.1f}")]
   if m.get("diverged_episodes"):  # only when the physics diverged: ended early, not completed
     rows += [("episodes ended by diverged physics", f"{m['diverged_episodes']}")]
+  if m.get("contacts_dropped_episodes"):  # only on MuJoCo Warp, when a world had more contacts than its places
+    rows += [("episodes with contacts not read for damage (raise warp_contacts)", f"{m['contacts_dropped_episodes']}")]
   rows += [(f"final health: {n} (mean / min)", f"{v:.2f} / {m['entity_health_min'][n]:.2f}")
            for n, v in m["entity_health"].items()]
   w = max(len(r[0]) for r in rows)
