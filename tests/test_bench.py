@@ -213,6 +213,7 @@ def test_warp_scaling_plan_and_report(capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--backend", "foo"], "backend: unknown backend 'foo'"),
     (["--backend", "native", "--task", ""], "backend: native times the --task throughput only"),
+    (["--backend", "warp", "--task", ""], "backend: warp times the --task throughput only"),
 ])
 def test_bench_cli_rejects_bad_backend(argv, message, tmp_path, capsys, monkeypatch):
   """Refused while the arguments are checked: nothing measured, nothing written."""

@@ -263,3 +263,12 @@ def test_the_evaluator_counts_episodes_with_contacts_it_could_not_read():
     res[kw.get("backend", "jax")] = E.evaluate(env, tasks.scripted_policy(env, "safe"), 2, episode_length=20)["metrics"]
   assert res["warp"]["contacts_dropped_episodes"] == 2
   assert res["jax"]["contacts_dropped_episodes"] == 0
+
+
+def test_bench_times_a_task_on_warp():
+  """``mjx-damage bench --backend warp``: the task row is timed on MuJoCo Warp and says so."""
+  from apps.bench.measure import measure_task
+
+  row = measure_task("place_plate", 2, 0.05, 2, backend="warp", overrides={"robot": "gripper"})
+  assert row["backend"] == "warp" and row["robot"] == "gripper" and row["envs"] == 2
+  assert row["env_steps_per_s"] > 0

@@ -15,7 +15,8 @@ steps) of ``jit(fori_loop(vmap(step)))`` on the K-box table scene
   native MuJoCo without damage, and multi-threaded ``mujoco.rollout``, in the
   same run, for the speed-up ratio;
 * physics steps/s of ``tasks.make("place_plate")`` when the task registry has it,
-  on ``--backend mjx`` (default) or ``native`` (MuJoCo on C threads, CPU).
+  on ``--backend mjx`` (default), ``native`` (MuJoCo on C threads, CPU) or ``warp``
+  (MuJoCo Warp, one device, the ``warp`` extra).
 
 ``--backend`` applies to the task throughput only: the K-box curves time
 ``mjx.step`` itself and are MJX by definition (native MuJoCo on the same scene is
@@ -231,7 +232,7 @@ def build_parser() -> Parser:
                   help="batch for the task (CPU or --backend native 256, GPU 32768)")
   R.add_backend_argument(ap, "here it picks the backend of the --task throughput only: the K-box curves are "
                              "MJX-only (they time mjx.step itself; native MuJoCo on that scene is in the reference "
-                             "rows of every run)")
+                             "rows of every run)", warp=True)
   ap.add_argument("--budget-s", type=float, default=540.0, help="stop starting measurements after this long")
   ap.add_argument("--note", dest="notes", action="append", default=[], help="free text stored in the JSON")
   ap.add_argument("--out", default=None, help="JSON path (the .md and .png go beside it) "
@@ -255,7 +256,7 @@ def main(argv=None) -> int:
       tasks.check_robot(args.robot, [args.task], "--robot")
       if args.task not in tasks.names():
         raise ValueError(f"--robot: only with a registry --task, got --task {args.task!r}")
-    if R.check_backend(args.backend) == "auto":  # the task's pick; nothing to pick without a task
+    if R.check_backend(args.backend, warp=True) == "auto":  # the task's pick; nothing to pick without a task
       args.backend = (R.pick_backend("auto", R.make_task(args.task, **args.task_kwargs)) if args.task in tasks.names()
                       else "mjx")
     native = args.backend == "native"  # native steps on CPU threads whatever the device: the CPU batch
@@ -277,8 +278,9 @@ def main(argv=None) -> int:
       raise ValueError(f"--{bad.replace('_', '-')}: must be a number of seconds > 0, got {getattr(args, bad)}")
     if args.task and args.task not in tasks.names():
       raise ValueError(f"--task: unknown task {args.task!r} (valid: {', '.join(tasks.names())}, or '' to skip)")
-    if native and not args.task:
-      raise ValueError("backend: native times the --task throughput only, and --task is '' (nothing to time)")
+    if args.backend in ("native", "warp") and not args.task:
+      raise ValueError(f"backend: {args.backend} times the --task throughput only, and --task is '' (nothing to time)")
+    R.warp_overrides(args.task, args.backend, args.task_envs, 1)  # warp: its checks, before anything compiles
     if native:  # a scene the native backend cannot run fails here, before anything compiles
       R.on_backend(R.make_task(args.task, **args.task_kwargs), args.backend, 1)
     if args.out is not None:

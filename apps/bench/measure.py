@@ -140,14 +140,16 @@ def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend:
                  overrides: dict | None = None) -> dict:
   """Physics steps/s of a registry task's ``step`` (damage on, zero action) on ``backend``.
 
-  ``mjx``: ``vmap(env.step)`` in a compiled ``fori_loop``. ``native``: the task's
+  ``mjx`` and ``warp`` (the task made on MuJoCo Warp for ``envs``): ``vmap(env.step)`` in a compiled
+  ``fori_loop``. ``native``: the task's
   :class:`~mjx_damage.native_batch.NativeBatchEnv` of ``envs`` stepped from Python
   (one native call and two jitted calls per step, as evaluation runs it); its
   jitted halves compile in the first step, so there ``compile_s`` is that first
   step's time. The row records ``backend`` and the robot. ``overrides``: ``tasks.make``
   keywords (``robot``). Raises ValueError for a scene the native backend cannot run.
   """
-  task = R.make_task(name, **(overrides or {}))
+  # warp: the task made on MuJoCo Warp for this batch (R.warp_overrides); it then times as mjx does
+  task = R.make_task(name, **(overrides or {}), **R.warp_overrides(name, backend, envs))
   robot = task.unwrapped.robot_name
   env = R.on_backend(task, backend, envs)
   if backend == "native":
@@ -170,7 +172,8 @@ def measure_task(name: str, envs: int, target_s: float, max_steps: int, backend:
   t0 = time.perf_counter()
   state = jax.block_until_ready(compiled(state, jnp.int32(steps)))
   secs = time.perf_counter() - t0
-  return dict(_task_row(name, "mjx", envs, n_sub, steps, secs, compile_s), robot=robot)
+  return dict(_task_row(name, backend if backend == "warp" else "mjx", envs, n_sub, steps, secs, compile_s),
+              robot=robot)
 
 
 def _measure_native_task(name: str, nenv, envs: int, target_s: float, max_steps: int) -> dict:
