@@ -110,21 +110,33 @@ def _physics_override(task, variant: str):
   return lambda d, ds, ctrl: physics.step(sys_, b, d.replace(ctrl=ctrl), ds, n)
 
 
-def _policy_rollout(stepper, policy, carry, steps: int, record=lambda s: None):
-  """``steps`` steps of ``vmap(policy)`` + ``vmap(stepper.step)`` from ``carry`` = (state, key) in one scan:
-  (final carry, ``record(state)`` after each step, stacked). The ``task`` variants time it; ``raw_replay``
-  records the controls it applied."""
+def _policy_step(stepper, policy, carry):
+  """One step of ``vmap(policy)`` + ``vmap(stepper.step)`` from ``carry`` = (state, key): (carry, actions)."""
   import jax
 
-  envs = carry[0].obs.shape[0]
+  s, k = carry
+  k, kp = jax.random.split(k)
+  a = jax.vmap(policy)(s, jax.random.split(kp, s.obs.shape[0]))
+  return (jax.vmap(stepper.step)(s, a), k), a
+
+
+def _policy_rollout(stepper, policy, carry, steps: int, record=lambda s: None):
+  """``steps`` :func:`_policy_step` from ``carry`` = (state, key) in one scan: (final carry, ``record(state)``
+  after each step, stacked). The ``task`` variants time it; ``raw_replay`` records the controls it applied."""
+  import jax
 
   def body(c, _):
-    s, k = c
-    k, kp = jax.random.split(k)
-    s = jax.vmap(stepper.step)(s, jax.vmap(policy)(s, jax.random.split(kp, envs)))
-    return (s, k), record(s)
+    c, _ = _policy_step(stepper, policy, c)
+    return c, record(c[0])
 
   return jax.lax.scan(body, carry, None, length=steps)
+
+
+def _timed_start(env, policy, state, steps: int):
+  """(state, key) where the ``task`` variant's timed calls start: after its warm-up call from ``state``."""
+  import jax
+
+  return jax.jit(lambda c: _policy_rollout(env, policy, c, steps)[0])((state, jax.random.PRNGKey(1)))
 
 
 def _task_controls(env, policy, state, steps: int, key=None):
@@ -146,16 +158,7 @@ def _task_actions(env, policy, carry, steps: int):
   drawn as :func:`_policy_rollout` draws them: ``no_policy`` steps them without the policy."""
   import jax
 
-  envs = carry[0].obs.shape[0]
-
-  def chosen(c):
-    def body(c, _):
-      s, k = c
-      k, kp = jax.random.split(k)
-      a = jax.vmap(policy)(s, jax.random.split(kp, envs))
-      return (jax.vmap(env.step)(s, a), k), a
-    return jax.lax.scan(body, c, None, length=steps)[1]
-
+  chosen = lambda c: jax.lax.scan(lambda c, _: _policy_step(env, policy, c), c, None, length=steps)[1]  # noqa: E731
   return jax.jit(chosen)(carry)
 
 
@@ -209,7 +212,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
 
     carry = (state.pipeline_state, jax.random.PRNGKey(1))
   elif variant == "no_policy":
-    warm = jax.jit(lambda c: _policy_rollout(env, policy, c, steps)[0])((state, jax.random.PRNGKey(1)))
+    warm = _timed_start(env, policy, state, steps)
     actions = _task_actions(env, policy, warm, steps)  # what the policy picks from the task's timed start
 
     def run(carry):
@@ -219,8 +222,7 @@ def measure(name: str, variant: str, envs: int, steps: int, repeats: int, policy
     carry = (warm[0], actions)
   elif variant == "raw_replay":
     n = task.n_substeps
-    warm = jax.jit(lambda c: _policy_rollout(env, policy, c, steps)[0])(
-        (state, jax.random.PRNGKey(1)))  # the task variant's timed start
+    warm = _timed_start(env, policy, state, steps)
     ctrls = _task_controls(env, policy, warm[0], steps, warm[1])  # f32[steps, envs, nu], what `task` applies from there
 
     def run(carry):

@@ -82,7 +82,9 @@ def check_supported(binding: Binding) -> None:
   mjx_warp.check_supported(binding)
 
 
-def _is_impl(path) -> bool:
+def is_impl_path(path) -> bool:
+  """Whether a pytree path (``jax.tree_util`` keys) lies under ``mjx.Data._impl``, the implementation's
+  private data: on MuJoCo Warp, among others, the contact list of the whole batch (no per-env axis)."""
   return any(getattr(k, "name", None) == "_impl" for k in path)
 
 
@@ -104,9 +106,9 @@ def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
   @custom_batching.custom_vmap
   def one(d, ds):
     d1 = jax.tree.map_with_path(
-        lambda p, x: warp_ffi._expand_dim_from_path(p, x, ndim) if _is_impl(p) else x[None], d)
+        lambda p, x: warp_ffi._expand_dim_from_path(p, x, ndim) if is_impl_path(p) else x[None], d)
     d2, ds2, _ = step(m, binding, d1, jax.tree.map(lambda x: x[None], ds), n_substeps, slots)
-    return (jax.tree.map_with_path(lambda p, x, x0: warp_ffi._squeeze_dim(x, x0) if _is_impl(p) else x[0], d2, d),
+    return (jax.tree.map_with_path(lambda p, x, x0: warp_ffi._squeeze_dim(x, x0) if is_impl_path(p) else x[0], d2, d),
             jax.tree.map(lambda x: x[0], ds2))
 
   @one.def_vmap
@@ -114,10 +116,10 @@ def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
     bd, bds = in_batched
     # a public field or damage leaf the same for every world (e.g. one ctrl for all) gets the batch axis
     d = jax.tree.map_with_path(
-        lambda p, x, b: x if (b or _is_impl(p)) else jnp.broadcast_to(x, (axis_size,) + x.shape), d, bd)
+        lambda p, x, b: x if (b or is_impl_path(p)) else jnp.broadcast_to(x, (axis_size,) + x.shape), d, bd)
     ds = jax.tree.map(lambda x, b: x if b else jnp.broadcast_to(x, (axis_size,) + x.shape), ds, bds)
     d2, ds2, _ = step(m, binding, d, ds, n_substeps, slots)
-    out_d = jax.tree.map_with_path(lambda p, x, b: b if _is_impl(p) else True, d2, bd)
+    out_d = jax.tree.map_with_path(lambda p, x, b: b if is_impl_path(p) else True, d2, bd)
     return (d2, ds2), (out_d, jax.tree.map(lambda _: True, ds2))
 
   return one

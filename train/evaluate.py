@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from mjx_damage import program_cache
+from mjx_damage import program_cache, warp_step
 from mjx_damage.native_batch import NativeBatchEnv
 from mjx_damage.randomize import check_fragility
 from train import memory as MEM
@@ -144,12 +144,8 @@ def _freeze(finished, state, nxt):
   Warp keeps the contacts of the whole batch in one list there, with no per-episode axis to select
   along, and nothing reads a finished episode's ``_impl`` (the summary reads health, metrics and
   public fields; a frozen episode's next step is discarded again)."""
-  def pick(path, old, new):
-    if any(getattr(k, "name", None) == "_impl" for k in path):
-      return new
-    return jnp.where(finished, old, new)
-
-  return jax.tree_util.tree_map_with_path(pick, state, nxt)
+  return jax.tree_util.tree_map_with_path(
+      lambda path, old, new: new if warp_step.is_impl_path(path) else jnp.where(finished, old, new), state, nxt)
 
 
 def summary(state) -> dict:

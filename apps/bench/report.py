@@ -164,8 +164,8 @@ def report_md(result: dict) -> str:
       lines += [f"On this CPU the batched MJX (JAX) step reaches {min(native.values()):.2f}-{max(native.values()):.2f}x "
                 "the throughput of native MuJoCo stepping one environment on one thread, even at its best batch: "
                 "for CPU work choose native MuJoCo (`--backend native` on eval, sweep, render and bench: MuJoCo on C "
-                "threads feeding the same damage functions) and keep MJX for accelerators. The reference-style per-entity Python evaluators are the "
-                "slow path on any device.", ""]
+                "threads feeding the same damage functions) and keep MJX for accelerators. The reference-style "
+                "per-entity Python evaluators are the slow path on any device.", ""]
   if result.get("skipped"):
     lines += ["Skipped: " + "; ".join(json.dumps(s) for s in result["skipped"]), ""]
   return "\n".join(lines)
