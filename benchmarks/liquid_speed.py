@@ -9,8 +9,13 @@ The liquid is most of pour_water's step on a GPU (``step_overhead.py``: 83 % at
 * ``full``      — the task's liquid as configured;
 * ``no_pairs``  — particle–particle pairs off (``pair_stiffness`` 0): the pair pass's cost;
 * ``no_geoms``  — no collidable geom: the particle–geom passes' cost (integration and pairs left);
-* ``iter1``     — one geom projection pass per substep instead of the configured number;
-* ``grid32`` / ``grid64`` — pairs from cell lists with 32 / 64 partner slots instead of every pair.
+* ``iter1`` / ``iter2`` — one / two geom projection passes per substep instead of the configured number;
+* ``grid32`` / ``grid64`` — pairs from cell lists with 32 / 64 partner slots instead of every pair;
+* ``two_pass``  — the pair damping in a second pass over the pairs, after the geom projection
+  (``pair_passes`` 2, the method before one fused pass became the default).
+
+Variants combine with ``+`` (applied left to right): ``two_pass+iter2`` is pour_water's liquid
+before session 28 (two pair passes, two geom passes).
 
 Rates are particle-substeps/s and the env-steps/s they allow at the task's
 ``n_substeps`` (liquid only). ``--hlo-dir`` writes the optimised HLO of each
@@ -36,13 +41,17 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-VARIANTS = ("full", "no_pairs", "no_geoms", "iter1", "grid32", "grid64")
+VARIANTS = ("full", "no_pairs", "no_geoms", "iter1", "iter2", "grid32", "grid64", "two_pass")
 
 
 def variant_model(lm, variant: str):
-  """The static liquid model of ``variant`` (``lm``: the task's)."""
+  """The static liquid model of ``variant`` (``lm``: the task's); ``a+b`` applies a, then b."""
   import numpy as np
 
+  if "+" in variant:
+    for part in variant.split("+"):
+      lm = variant_model(lm, part)
+    return lm
   if variant == "full":
     return lm
   if variant == "no_pairs":
@@ -51,10 +60,12 @@ def variant_model(lm, variant: str):
     z = np.zeros(0, np.int32)
     return lm.replace(groups=(), column_geom=z, column_link=z, column_body=z, column_root=z,
                       column_link_mask=np.zeros((0, lm.column_link_mask.shape[1]), bool), world_planes=())
-  if variant == "iter1":
-    return lm.replace(iterations=1)
+  if variant in ("iter1", "iter2"):
+    return lm.replace(iterations=int(variant[4:]))
   if variant in ("grid32", "grid64"):
     return lm.replace(pair_search="grid", pair_candidates=int(variant[4:]))
+  if variant == "two_pass":
+    return lm.replace(pair_passes=2)
   raise ValueError(f"variant: unknown {variant!r}; valid: {', '.join(VARIANTS)}")
 
 
@@ -127,8 +138,9 @@ def main(argv=None) -> int:
   args = ap.parse_args(argv)
   variants = [v for v in args.variants.split(",") if v]
   for v in variants:
-    if v not in VARIANTS:
-      ap.error(f"--variants: unknown {v!r}; valid: {', '.join(VARIANTS)}")
+    for part in v.split("+"):
+      if part not in VARIANTS:
+        ap.error(f"--variants: unknown {part!r} in {v!r}; valid: {', '.join(VARIANTS)} (combined with +)")
   for flag in ("envs", "substeps", "repeats"):
     if getattr(args, flag) < 1:
       ap.error(f"--{flag}: must be ≥ 1, got {getattr(args, flag)}")

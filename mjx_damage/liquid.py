@@ -17,6 +17,8 @@ Config (top-level key ``liquid``)::
       pair_search: auto             # grid: cell lists (sort by cell, O(P·C)); all: every pair (O(P²), one fused pass);
                                     # auto: grid from 1024 particles
       pair_candidates: 64           # C, partner slots per particle with grid (the 27 cells around it)
+      pair_passes: 1                # 1: push and damping in one pass over the pairs, at the predicted positions;
+                                    # 2: damping in a second pass, on the velocity after the geom projection
       max_speed: 4.0                # m/s, speed clamp (also the tunnelling guard, see below)
       iterations: 2                 # geom projection passes per substep
       exclude: [flame_geom]         # geoms the liquid passes through (besides non-colliding ones)
@@ -25,11 +27,13 @@ Model (position-based dynamics, per physics substep dt, one environment)::
 
     v ← (v + g·dt) / (1 + damping·dt)
     p* = p + v·dt
-    p* += pair repulsion (pairs closer than 2r pushed apart, capped at r/4 per substep;
-          partners from cell lists of side 2.2 r or every pair, see pair_search)
+    one pass over the pairs at p* (partners from cell lists of side 2.2 r or every pair, see pair_search):
+      Δv = pair damping of v (relative normal velocity of touching pairs removed, see _pair_terms)
+      v += Δv;  p* += Δv·dt + pair repulsion (pairs closer than 2r pushed apart, capped at r/4 per substep)
     repeat `iterations` times: for every collidable geom with φ(p*) < r: p* += (r − φ)·n
     then for every plane of the world body: p* += max(r − φ, 0)·n  (the floor has the last word)
-    v ← (p* − p)/dt;  in contact: tangential v relative to the geom's surface velocity × (1 − friction),
+    v ← (p* − p)/dt   (pair_passes 2: the damping is applied here instead, on this v, in a second pass)
+    in contact: tangential v relative to the geom's surface velocity × (1 − friction),
                       approaching normal velocity removed;  ‖v‖ ≤ max_speed
     p ← p*
 
@@ -79,13 +83,14 @@ DEFAULTS = {
     "iterations": 2,
     "pair_search": "auto",
     "pair_candidates": 64,
+    "pair_passes": 1,
 }
 PAIR_SEARCHES = ("auto", "grid", "all")
 # "auto" picks the grid from this many particles: below it, every pair in one fused pass is cheaper
 # than sorting into cells (XLA:CPU, benchmarks/physics_models.py: grid ≈ 2.5 µs, all ≈ 0.4 µs·P/128 per particle)
 GRID_FROM = 1024
 _KEYS = ("particles", "radius", "spawn", "damping", "friction", "contact_distance", "pair_stiffness",
-         "max_speed", "iterations", "exclude", "pair_search", "pair_candidates")
+         "max_speed", "iterations", "exclude", "pair_search", "pair_candidates", "pair_passes")
 _SPAWN_KEYS = ("center", "size", "body", "offset")
 _JITTER = 0.05  # × radius: breaks the lattice's symmetry so piles settle naturally
 _SKIN = 1.1  # pairs within 1.1 · 2r count as touching (resting neighbours count)
@@ -104,6 +109,7 @@ class LiquidModel:
   iterations: int = struct.field(pytree_node=False)
   pair_search: str = struct.field(pytree_node=False)  # "grid" (cell lists) or "all" (every pair), resolved
   pair_candidates: int = struct.field(pytree_node=False)  # C, partner slots per particle with "grid"
+  pair_passes: int = struct.field(pytree_node=False)  # 1: push and damping in one pass; 2: damping after the geoms
   spawn_body: int = struct.field(pytree_node=False)  # body id, or −1: world frame
   lattice: np.ndarray = struct.field(pytree_node=False)  # f32[P, 3] spawn points in the spawn frame, m
   spawn_pos: np.ndarray = struct.field(pytree_node=False)  # f32[3] spawn frame origin at reset pose
@@ -170,6 +176,7 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
   if search not in PAIR_SEARCHES:
     _fail("liquid.pair_search", f"expected one of {', '.join(PAIR_SEARCHES)}, got {search!r}")
   slots = _int("liquid.pair_candidates", cfg.get("pair_candidates", DEFAULTS["pair_candidates"]), 8, MAX_PARTICLES)
+  passes = _int("liquid.pair_passes", cfg.get("pair_passes", DEFAULTS["pair_passes"]), 1, 2)
   if search == "auto":
     search = "grid" if n >= GRID_FROM else "all"
   if slots >= n - 1:
@@ -232,6 +239,7 @@ def build(model: mujoco.MjModel, binding, raw: Mapping):
       iterations=iters,
       pair_search=search,
       pair_candidates=slots,
+      pair_passes=passes,
       spawn_body=int(bid),
       lattice=lattice,
       spawn_pos=spawn_pos.astype(np.float32),
@@ -323,39 +331,71 @@ def _pair_geometry(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
   return near, d2, inv, diff
 
 
+def _capped_push(lm: LiquidModel, sx, sy, sz) -> jax.Array:
+  """f32[P, 3] Jacobi push from the summed overlap terms, capped at r/4 per particle per substep.
+
+  The cap keeps a dense pile from shoving a particle through a thin wall in one step.
+  """
+  push = 0.5 * lm.pair_stiffness * jnp.stack([sx, sy, sz], axis=-1)
+  n = jnp.linalg.norm(push, axis=-1, keepdims=True)
+  return push * jnp.minimum(1.0, 0.25 * lm.radius / jnp.maximum(n, 1e-12))
+
+
+def _push_weight(lm: LiquidModel, near, d2, inv):
+  """f32[P, C] overlap / distance of each touching pair: the push along diff is w · diff (no normal formed)."""
+  return jnp.where(near, jnp.maximum(2.0 * lm.radius - d2 * inv, 0.0), 0.0) * inv
+
+
+def _normal_velocity(v, vj: list, diff: list, inv) -> jax.Array:
+  """f32[P, C] (Δv·diff)/‖diff‖²: times diff it is Δv's normal part, so the unit normal is never formed."""
+  return sum((v[:, k : k + 1] - vj[k]) * diff[k] for k in range(3)) * inv * inv
+
+
 def _pair_push(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array):
   """Jacobi correction pushing overlapping pairs apart, f32[P, 3] m, and touching partners per particle f32[P, 1].
 
-  The push is capped at r/4 per particle per substep so a dense pile can never
-  shove a particle through a thin wall in one step. Pairs within 2.2 r count as
-  touching (a 10 % skin so resting neighbours count). Push along the unit vector
-  n = diff/‖diff‖ by the overlap: overlap · inv · diff, so no normal is formed.
+  Pairs within 2.2 r count as touching (a 10 % skin so resting neighbours count).
+  Push along the unit vector n = diff/‖diff‖ by the overlap: overlap · inv · diff.
+  Used with ``pair_passes`` 2; 1 uses :func:`_pair_terms`.
   """
   near, d2, inv, diff = _pair_geometry(lm, p, pj, valid)
-  w = jnp.where(near, jnp.maximum(2.0 * lm.radius - d2 * inv, 0.0), 0.0) * inv
+  w = _push_weight(lm, near, d2, inv)
   sx, sy, sz, touching = _sums((w * diff[0], w * diff[1], w * diff[2], near.astype(p.dtype)))
-  push = 0.5 * lm.pair_stiffness * jnp.stack([sx, sy, sz], axis=-1)
-  n = jnp.linalg.norm(push, axis=-1, keepdims=True)
+  return _capped_push(lm, sx, sy, sz), jnp.maximum(touching, 1.0)[:, None]
+
+
+def _pair_terms(lm: LiquidModel, p: jax.Array, pj: list, valid: jax.Array, v: jax.Array, vj: list):
+  """Push f32[P, 3] m and damping f32[P, 3] m/s of every particle, in ONE pass over the pairs at ``p``.
+
+  The damping (a dashpot on the relative normal velocity of touching pairs,
+  averaged over each particle's touching partners so the Jacobi update never
+  overshoots; it only removes energy, which lets a glass of liquid come to rest)
+  acts on ``v``, the predicted velocity, with the pair geometry the push uses:
+  one variadic reduction of seven sums instead of two passes that each rebuild
+  the [P, C] geometry. The push's own velocity (push/dt) is damped in the next
+  substep, before it moves the particle again.
+  """
+  near, d2, inv, diff = _pair_geometry(lm, p, pj, valid)
+  w = _push_weight(lm, near, d2, inv)
+  vn = _normal_velocity(v, vj, diff, inv)
+  sx, sy, sz, touching, dx, dy, dz = _sums(
+      (w * diff[0], w * diff[1], w * diff[2], near.astype(p.dtype), vn * diff[0], vn * diff[1], vn * diff[2]))
   count = jnp.maximum(touching, 1.0)[:, None]
-  return push * jnp.minimum(1.0, 0.25 * lm.radius / jnp.maximum(n, 1e-12)), count
+  return _capped_push(lm, sx, sy, sz), -0.5 * jnp.stack([dx, dy, dz], axis=-1) / count
 
 
 def _pair_damp(lm: LiquidModel, p, pj, valid, count, v: jax.Array, vj: list) -> jax.Array:
   """Velocity change removing relative normal motion of touching pairs, f32[P, 3] m/s.
 
-  Position pushes turned into velocity (v = Δp/dt) would bounce a settling
-  pile upward; damping the pairs' relative normal velocity (a dashpot, averaged
-  over each particle's ``count`` touching partners so the Jacobi update never
-  overshoots) only removes energy, which is what lets a glass of liquid come to
-  rest. The pair geometry is recomputed from ``p`` (the predicted positions the
+  ``pair_passes`` 2: the velocity after the geom projection, pushes included, is
+  damped in this second pass (:func:`_pair_terms` explains the dashpot). The pair geometry is recomputed from ``p`` (the predicted positions the
   push used) inside this pass's own reduction: the optimisation barrier keeps
   XLA from merging it with the push's, which would keep [P, C] normals alive
   in memory across the geom passes.
   """
   p, pj = jax.lax.optimization_barrier((p, pj))
   _, _, inv, diff = _pair_geometry(lm, p, pj, valid)
-  # vn·n = (Δv·diff)·diff / ‖diff‖², so the unit normal is never formed either
-  vn = sum((v[:, k : k + 1] - vj[k]) * diff[k] for k in range(3)) * inv * inv  # [P, C]
+  vn = _normal_velocity(v, vj, diff, inv)
   sx, sy, sz = _sums(tuple(vn * diff[k] for k in range(3)))
   return -0.5 * jnp.stack([sx, sy, sz], axis=-1) / count
 
@@ -482,8 +522,13 @@ def advance(m, binding, d, ds, dt):
   if pairs:
     take, valid = _partners(lm, p)
     p_pair = p
-    push, count = _pair_push(lm, p_pair, take(p_pair), valid)
-    p = p + push
+    if lm.pair_passes == 1:
+      push, dv = _pair_terms(lm, p, take(p), valid, v, take(v))
+      v = v + dv
+      p = p + push + dv * dt
+    else:
+      push, count = _pair_push(lm, p_pair, take(p_pair), valid)
+      p = p + push
   ncol = lm.column_geom.size
   if ncol:
     for it in range(lm.iterations):  # static: a few projection passes
@@ -507,7 +552,7 @@ def advance(m, binding, d, ds, dt):
              tuple(w[:, 0] for w in _wet_bits(lm, phi_k[:, None], np.array([k]))))
       closest = _merge_closest(closest, key)
   v = (p - p0) / dt
-  if pairs:
+  if pairs and lm.pair_passes == 2:
     v = v + _pair_damp(lm, p_pair, take(p_pair), valid, count, v, take(v))
   if ncol:
     # friction and no approach against the closest geom, in that geom's moving frame

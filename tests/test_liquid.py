@@ -220,6 +220,7 @@ def _with(**liquid):
         ({"spawn": None}, "liquid.spawn"),
         ({"pair_search": "fast"}, "liquid.pair_search"),
         ({"pair_candidates": 4}, "liquid.pair_candidates"),
+        ({"pair_passes": 3}, "liquid.pair_passes"),
     ],
 )
 def test_bad_configs_name_the_field(liquid, field):
@@ -380,3 +381,7 @@ def test_pair_passes_equal_the_pairwise_formulas(scene):
   rel = np.sum((vn_[:, None, :] - vn_[None, :, :]) * nrm, axis=-1)
   np.testing.assert_allclose(damp, -0.5 * np.sum(rel[..., None] * nrm, axis=1) / cnt, atol=2e-6)
   assert near.sum() > P and (overlap > 0).any()  # many touching pairs: not vacuous
+  # pair_passes 1: the same push and damping from one reduction over the pairs
+  push1, damp1 = Lq._pair_terms(lm, p, take(p), valid, v, take(v))
+  np.testing.assert_allclose(push1, raw * cap, atol=2e-7)
+  np.testing.assert_allclose(damp1, -0.5 * np.sum(rel[..., None] * nrm, axis=1) / cnt, atol=2e-6)

@@ -12,6 +12,7 @@ ls = load_benchmark("liquid_speed")
 
 @pytest.mark.parametrize("argv, field", [
     (["--variants", "full,warp"], "--variants"),
+    (["--variants", "two_pass+iter3"], "--variants"),
     (["--envs", "0"], "--envs"),
     (["--substeps", "-1"], "--substeps"),
     (["--task", "nope"], "--task"),
@@ -36,3 +37,14 @@ def test_toy_run_writes_one_row_per_variant(tmp_path):
   assert [r["variant"] for r in res["rows"]] == ["full", "no_pairs"]
   assert all(r["particle_substeps_per_s"] > 0 and r["particles"] == 128 for r in res["rows"])
   assert res["command"].startswith("python benchmarks/liquid_speed.py")
+
+
+def test_combined_variants_apply_each_part():
+  """``two_pass+iter2``: both changes in one model, each part alone changes only its own field."""
+  import tasks
+
+  lm = tasks.make("pour_water", robot="gripper").unwrapped.damage_binding.liquid
+  both = ls.variant_model(lm, "two_pass+iter2")
+  assert (both.pair_passes, both.iterations) == (2, 2)
+  assert (lm.pair_passes, lm.iterations) == (1, 1)  # the task's own: one pair pass, one geom pass
+  assert ls.variant_model(lm, "two_pass").iterations == lm.iterations
