@@ -101,6 +101,8 @@ def _stream(env, run, keys, episodes: int, chunk: int, T: int, task: str, env_co
   pending = run(keys[:chunk])
   for i in range(0, keys.shape[0], chunk):
     nxt = run(keys[i + chunk : i + 2 * chunk]) if i + chunk < keys.shape[0] else None  # asynchronous dispatch
+    if nxt is not None:  # its copy to the host starts as soon as it is computed, while the caller writes chunk i
+      jax.tree.map(lambda a: a.copy_to_host_async(), nxt)
     n = min(chunk, episodes - i)
     steps, success, final_h = jax.tree.map(lambda a: np.asarray(a)[:n], pending)  # waits for chunk i only
     if log:
