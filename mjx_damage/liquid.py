@@ -307,8 +307,8 @@ def _sums(terms: tuple) -> tuple:
   [envs, P, K] arrays between them and read them back: for all particle pairs at
   32768 envs × 128 particles, five 2 GB arrays per substep, and the pair pass was 2/3
   of the liquid's time. With one reduction of several outputs it stores only the
-  shared weight (one f32 and one bool array for the push, one f32 for the damping:
-  its optimised HLO, ``liquid_speed.py --hlo-dir``). Measured by
+  shared weights (with two pair passes: one f32 and one bool array for the push, one
+  f32 for the damping; its optimised HLO, ``liquid_speed.py --hlo-dir``). Measured by
   ``benchmarks/liquid_speed.py`` (results/liquid_speed_gpu.md): summing the stacked
   terms instead is 2.5× slower on a GPU, and slower on XLA:CPU too.
   """
@@ -388,8 +388,9 @@ def _pair_damp(lm: LiquidModel, p, pj, valid, count, v: jax.Array, vj: list) -> 
   """Velocity change removing relative normal motion of touching pairs, f32[P, 3] m/s.
 
   ``pair_passes`` 2: the velocity after the geom projection, pushes included, is
-  damped in this second pass (:func:`_pair_terms` explains the dashpot). The pair geometry is recomputed from ``p`` (the predicted positions the
-  push used) inside this pass's own reduction: the optimisation barrier keeps
+  damped in this second pass (:func:`_pair_terms` explains the dashpot). The pair
+  geometry is recomputed from ``p`` (the predicted positions the push used) inside
+  this pass's own reduction: the optimisation barrier keeps
   XLA from merging it with the push's, which would keep [P, C] normals alive
   in memory across the geom passes.
   """
