@@ -45,7 +45,7 @@ def build_parser() -> Parser:
   ap.add_argument("--episodes", type=int, default=32, help="episodes per seed and level")
   ap.add_argument("--episode-length", type=int, default=None, help="env steps (default: the task's)")
   ap.add_argument("--safe-threshold", type=float, default=95.0)
-  R.add_backend_argument(ap, default="auto")
+  R.add_backend_argument(ap, default="auto", warp=True)
   ap.add_argument("--native-envs", type=int, default=256,
                   help="native backend: episodes stepped at once (at most fragility levels x --episodes)")
   ap.add_argument("--out", default=None, help="JSON path; the markdown table goes beside it (.md) "
@@ -69,6 +69,17 @@ def trained_overrides(task: str, policies) -> dict:
   return first
 
 
+def _warp_devices(setup, backend: str) -> int:
+  """Devices a ``--backend warp`` sweep would run on, known before anything distributed starts (1 otherwise)."""
+  if backend != "warp":
+    return 1
+  if setup.multi_process:
+    raise ValueError("backend: warp steps one batch on one device; a sweep over several processes has several "
+                     "(use mjx)")
+  spec = distributed.parse_devices(setup.device_spec)
+  return len(jax.devices()) if spec == "all" else spec
+
+
 def main(argv=None) -> int:
   argv = list(sys.argv[1:] if argv is None else argv)
   ap = build_parser()
@@ -87,7 +98,7 @@ def main(argv=None) -> int:
     except ValueError:
       raise ValueError(f"fragility: expected comma-separated numbers, got {args.fragility!r}") from None
     S.check_sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold)
-    R.check_backend(args.backend)
+    R.check_backend(args.backend, warp=True)
     if args.native_envs < 1:
       raise ValueError(f"native_envs: must be >= 1, got {args.native_envs}")
     for t in tasks:
@@ -95,6 +106,9 @@ def main(argv=None) -> int:
     for p in policies:
       R.parse_policy_spec(p)
     overrides = {t: R.task_overrides(t, trained_overrides(t, policies), args.robot, args.task_arg) for t in tasks}
+    # --backend warp: each task made on MuJoCo Warp with one batch of every level's episodes (one call per seed)
+    warp_kw = {t: R.warp_overrides(t, args.backend, len(levels) * args.episodes, _warp_devices(setup, args.backend))
+               for t in tasks}
     if args.episode_length is not None and args.episode_length < 1:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
     if setup.multi_process and args.out is None:
@@ -145,16 +159,19 @@ def main(argv=None) -> int:
   backends = {}  # task → the backend it runs on (auto picks per task); S.sweep makes every env first
 
   def make_env(task):
-    env = R.make_task(task, **overrides[task])
+    env = R.make_task(task, **overrides[task], **warp_kw[task])
     backends[task] = R.pick_backend(args.backend, env, len(devices) * jax.process_count())
     return R.on_backend(env, backends[task], native_envs)
+
+  def describe(task, spec, backend):
+    # MuJoCo Warp's kernels are FFI calls, which jax.export cannot store: a Warp run keeps no traced program
+    return None if backend == "warp" else R.program_description("sweep", task, spec, backend=backend)
 
   with heartbeat("sweep"):
     res = S.sweep(tasks, policies, seeds, levels, args.episodes, args.safe_threshold, args.episode_length,
                   devices=devices, on_progress=lambda r: write(r, False), make_env=make_env,
                   make_policy=R.make_policy, episode_length_of=R.episode_length_of,
-                  describe_program=lambda task, spec: R.program_description("sweep", task, spec,
-                                                                            backend=backends[task]),
+                  describe_program=lambda task, spec: describe(task, spec, backends[task]),
                   program_roots=R.PROGRAM_ROOTS)
   print("\n" + write(res, True))
   print(f"outputs: {out_path}, {md_path}")

@@ -34,7 +34,7 @@ def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, slots:
 
   In :func:`mjx_damage.physics.substep`'s order: temperature, liquid, then the damage of the signals.
   """
-  qvel = d.qvel
+  qpos, qvel = d.qpos, d.qvel
   d = jax.vmap(lambda x: mjx.step(m, x))(d)
   wc = mjx_warp.world_contacts(m, d, slots)
   pub = mjx_warp.public(d)
@@ -44,7 +44,7 @@ def substep(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, slots:
     touch = jax.vmap(lambda g, a: T.touching_pairs(tm, binding, g, a))(wc.geom, wc.active)
     ds = jax.vmap(lambda x, s, t: T.advance(m, binding, x, s, dt, touch=t))(pub, ds, touch)
   ds = jax.vmap(lambda x, s: Lq.advance(m, binding, x, s, dt))(pub, ds)
-  signals = mjx_warp.link_signals(binding, d, wc, qvel, ds.temperature, ds.exposure)
+  signals = mjx_warp.link_signals(binding, m, d, wc, qpos, qvel, ds.temperature, ds.exposure)
   ds = jax.vmap(lambda s, g: apply_signals(s, g, dt))(ds, signals)
   # a world whose contacts or constraint rows overflowed Warp's own buffers lost some uncounted: at least one
   lost = jnp.maximum(wc.overflow, (d._impl.overflow != 0).astype(jnp.int32))

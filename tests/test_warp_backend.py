@@ -2,7 +2,7 @@
 
 MJX's Warp implementation runs on CPU too (warp-lang, the ``warp`` extra, is in the test extra), so the
 batch-level readout of Warp's one contact list is checked here: the same health after a drop, the same
-contact forces on a sliding box, the per-world slots and what is refused.
+contact forces on a sliding box, joint-limit forces, the per-world slots and what is refused.
 """
 
 import numpy as np
@@ -101,16 +101,34 @@ def test_contacts_beyond_the_slots_are_counted_per_world():
   assert (np.asarray(links)[:, 1] == -1).all()
 
 
-def test_joint_limit_forces_are_refused_by_name():
-  hinge = mujoco.MjModel.from_xml_string(
-      """<mujoco><worldbody><body name="door"><joint name="h" type="hinge" range="-1 1" limited="true"/>
-      <geom type="box" size=".1 .01 .2"/></body></worldbody></mujoco>""")
-  with pytest.raises(ValueError, match="backend.*joint-limit"):
-    mjx_warp.check_supported(bind(hinge, {"entities": {"door": {"params": "plate", "bodies": ["door"],
-                                                                  "constraint": True}}}))
-  mjx_warp.check_supported(bind(drop.load_scene(), drop.DROP_CONFIG))  # contacts only: supported
-  mjx_warp.check_supported(tasks.make("pour_water", robot="gripper").unwrapped.damage_binding)  # liquid
-  mjx_warp.check_supported(tasks.make("add_firewood", robot="gripper").unwrapped.damage_binding)  # heat
+def test_joint_limit_forces_and_damage_match_the_jax_implementation():
+  """A door servoed past its 90° stop and a slider pushed against its end, no contacts: the limit force on each
+  child link and the health after 200 substeps on Warp equal the MJX-JAX backend's (test_joint_limits' scene);
+  a world whose servo stops short (80°) has no limit row and loses nothing."""
+  from test_joint_limits import CONFIG, PAST, PUSH, SHORT, XML
+
+  model = mujoco.MjModel.from_xml_string(XML)
+  binding = bind(model, CONFIG)
+  mjx_warp.check_supported(binding)  # limits are read: nothing refused
+  qpos = jnp.tile(jnp.asarray(model.qpos0, jnp.float32), (2, 1)).at[:, :2].set(jnp.array([np.pi / 2, 0.1]))
+  qpos = qpos.at[1, :2].set(jnp.array([SHORT, 0.05]))  # world 1: inside both ranges
+  ctrl = jnp.array([[PAST, PUSH], [SHORT, 0.0]], jnp.float32)
+  ds0 = jax.vmap(lambda _: physics.init_state(binding))(jnp.arange(2))
+  mj = mjx.put_model(model)
+  dj = jax.vmap(lambda q, c: mjx.make_data(mj).replace(qpos=q, ctrl=c))(qpos, ctrl)
+  run = jax.jit(jax.vmap(lambda d, s: physics.step(mj, binding, d, s, 200)))
+  settled, _ = run(dj, ds0)  # pressed into the stops: each limit holds its actuator's load
+  fj = jax.jit(jax.vmap(lambda d: mjx_jax.limit_forces(binding, mj, mjx.forward(mj, d))[0]))(settled)
+  mw = warp_model(model)
+  ds_w = warp_data(model, settled.qpos, settled.qvel).replace(ctrl=ctrl)
+  fw = jax.jit(lambda d: mjx_warp.limit_forces(binding, mw, jax.vmap(lambda x: mjx.step(mw, x))(d), d.qpos)[0])(ds_w)
+  np.testing.assert_allclose(np.asarray(fw), np.asarray(fj), rtol=0.02, atol=0.05)
+  assert np.abs(np.asarray(fw)[0]).max() > 10.0 and np.abs(np.asarray(fw)[1]).max() == 0.0  # not vacuous
+  _, dsj = run(dj, ds0)
+  dw = warp_data(model, qpos).replace(ctrl=ctrl)
+  _, dsw, _ = jax.jit(lambda d, s: warp_step.step(mw, binding, d, s, 200))(dw, ds0)
+  np.testing.assert_allclose(np.asarray(dsw.link_health), np.asarray(dsj.link_health), atol=1.5)
+  assert float(dsw.link_health[0, 0]) < 90.0 and (np.asarray(dsw.link_health)[1] == 100.0).all()
 
 
 def both_steps(model, config, substeps, qpos=None):
@@ -251,6 +269,41 @@ def test_eval_cli_runs_a_task_on_warp(tmp_path):
   assert res["safe"]["metrics"]["completion"] == 1.0 and res["safe"]["metrics"]["safe_completion"] == 1.0
   assert res["unsafe"]["metrics"]["completion"] == 1.0 and res["unsafe"]["metrics"]["safe_completion"] == 0.0
 
+
+
+@pytest.mark.slow  # about 40 s of compiling on 2 CPU cores
+def test_sweep_cli_runs_a_task_on_warp(tmp_path):
+  """``mjx-damage sweep --backend warp``: both fragility levels' episodes run in the Warp env's one batch, the
+  scripted policies separate at the task's fragility, and a 4x tougher plate loses no more health."""
+  import json
+
+  from apps import cli
+
+  out = tmp_path / "sweep.json"
+  assert cli.main(["sweep", "--tasks", "place_plate", "--robot", "gripper", "--fragility", "0.25,1",
+                   "--episodes", "2", "--backend", "warp", "--out", str(out)]) == 0
+  res = json.loads(out.read_text())
+  assert res["backend_per_task"] == {"place_plate": "warp"}
+  rows = {(r["policy"], r["fragility"]): r for r in res["rows"]}
+  assert rows[("scripted:safe", 1.0)]["SC"] == 100.0
+  assert rows[("scripted:unsafe", 1.0)]["C"] == 100.0 and rows[("scripted:unsafe", 1.0)]["SC"] == 0.0
+  assert rows[("scripted:unsafe", 0.25)]["avg_health"] >= rows[("scripted:unsafe", 1.0)]["avg_health"]
+
+
+@pytest.mark.slow  # about 70 s of compiling and stepping on 2 CPU cores
+def test_a_joint_limit_task_separates_on_warp_as_on_jax():
+  """Turn On Faucet's damage is the lever forced against its stop (joint-limit force + finger contact): on Warp
+  the scripted policies separate and the unsafe one's episode cost is the MJX-JAX backend's within 5 %."""
+  from train import evaluate as E
+
+  res = {}
+  for kw in ({"backend": "warp", "num_envs": 2}, {}):
+    env = tasks.make("turn_on_faucet", robot="gripper", **kw)
+    for style in ("safe", "unsafe"):
+      res[kw.get("backend", "jax"), style] = E.evaluate(env, tasks.scripted_policy(env, style), 2)["metrics"]
+  assert res["warp", "safe"]["safe_completion"] == 1.0 and res["warp", "safe"]["cost_mean"] == 0.0
+  assert res["warp", "unsafe"]["completion"] == 1.0 and res["warp", "unsafe"]["safe_completion"] == 0.0
+  np.testing.assert_allclose(res["warp", "unsafe"]["cost_mean"], res["jax", "unsafe"]["cost_mean"], rtol=0.05)
 
 def test_the_evaluator_counts_episodes_with_contacts_it_could_not_read():
   """A Warp env with too few contact places per world: the wrapper keeps each episode's worst step in

@@ -18,9 +18,13 @@ normal, tangent 1, tangent 2:
   one row), tangent i = (row 2i − row 2i+1) · μ_i.
 
 The same places give the temperature model its link–source contacts
-(:func:`mjx_damage.temperature.touching_pairs`). Not read yet (refused by
-:func:`check_supported`): joint-limit forces (their rows are placed
-differently from MJX-JAX's).
+(:func:`mjx_damage.temperature.touching_pairs`).
+
+Joint limits: Warp gives a row only to an active limit, at a place that varies
+from step to step, so :func:`limit_forces` finds each tracked joint's row by
+its type (``efc__type == mjCNSTR_LIMIT_JOINT``) and id (``efc__id`` = the
+joint) among the world's ``nefc`` rows, as the native backend does, and
+:mod:`mjx_damage.joint_limits` turns it into a force on the child link.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import numpy as np
 from flax import struct
 from mujoco import mjx
 
+from mjx_damage.joint_limits import limit_sign, link_forces
 from mjx_damage.kinematics import link_acceleration, link_velocity
 from mjx_damage.signals import LinkSignals
 
@@ -42,10 +47,11 @@ if TYPE_CHECKING:  # annotation only
 
 
 def check_supported(binding: "Binding") -> None:
-  """Raise ValueError naming the config part this backend does not read yet (before anything compiles)."""
-  if binding.limit_joint.size:
-    raise ValueError("backend: 'warp' does not read joint-limit forces yet; this config tracks limits of "
-                     f"{binding.limit_joint.size} joint(s) (use backend 'jax')")
+  """Raise ValueError naming the config part this backend does not read (before anything compiles): none now.
+
+  Kept as the one place a future unsupported part is refused; every config the JAX backend reads is read here.
+  """
+  del binding
 
 
 def _local_forces(m: mjx.Model, d: mjx.Data) -> jax.Array:
@@ -153,20 +159,51 @@ def public(d: mjx.Data) -> mjx.Data:
   return d.replace(_impl=None)
 
 
-def link_signals(binding: "Binding", d: mjx.Data, wc: WorldContacts, qvel_before: jax.Array, temperature: jax.Array,
-                 exposure: jax.Array) -> LinkSignals:
-  """:class:`LinkSignals` with a leading batch axis B.
+def limit_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, qpos_before: jax.Array):
+  """World-frame forces on tracked links from the limits of ``binding.limit_joint``, every world.
+
+  ``d``: a batch's data after ``mjx.step`` (its constraint rows and kinematics are the forward pass's);
+  ``qpos_before`` f32[B, nq]: the positions that forward pass saw (which bound a joint is at).
+
+  Returns:
+    forces: f32[B, J, 3] N, zero for a joint inside its range; force_link: i32[B, J] the child link of each joint.
+  """
+  jnt = binding.limit_joint
+  B = d.qpos.shape[0]
+  if jnt.size == 0:
+    return jnp.zeros((B, 0, 3), jnp.float32), jnp.zeros((B, 0), jnp.int32)
+  impl = d._impl
+  rows = jnp.arange(impl.efc__force.shape[-1])
+  used = rows[None, :] < jnp.reshape(impl.nefc, (B, 1))  # f32[B, njmax] rows hold stale values past nefc
+  mine = (used[..., None] & (impl.efc__type[..., None] == int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT))
+          & (impl.efc__id[..., None] == jnp.asarray(jnt, jnp.int32)))  # bool[B, njmax, J]
+  row_force = jnp.sum(jnp.where(mine, impl.efc__force[..., None], 0.0), axis=1)  # f32[B, J], ≥ 0
+
+  def one(x, q_all, g):
+    q = q_all[m.jnt_qposadr[jnt]]
+    lo, hi = m.jnt_range[jnt, 0], m.jnt_range[jnt, 1]
+    gen = limit_sign(q, lo, hi) * g
+    return link_forces(gen, binding.limit_hinge, x.xaxis[jnt], x.xanchor[jnt], x.xipos[m.jnt_bodyid[jnt]])
+
+  forces = jax.vmap(one)(public(d), qpos_before, row_force)
+  return forces.astype(jnp.float32), jnp.broadcast_to(jnp.asarray(binding.limit_link, jnp.int32), (B, jnt.size))
+
+
+def link_signals(binding: "Binding", m: mjx.Model, d: mjx.Data, wc: WorldContacts, qpos_before: jax.Array,
+                 qvel_before: jax.Array, temperature: jax.Array, exposure: jax.Array) -> LinkSignals:
+  """:class:`LinkSignals` with a leading batch axis B: contact forces, then joint-limit forces (as MJX-JAX's).
 
   ``d`` is a batch's data after ``mjx.step`` (Warp implementation), which leaves the forward pass's
   contacts, constraint forces, ``qacc`` and kinematics in place and only advances ``qpos``/``qvel``;
-  ``wc`` its :func:`world_contacts`; ``qvel_before`` f32[B, nv] the velocity that forward pass saw
-  (the link accelerations use it). ``temperature``, ``exposure``: f32[B, L].
+  ``wc`` its :func:`world_contacts`; ``qpos_before``, ``qvel_before`` f32[B, nq], f32[B, nv] the state that
+  forward pass saw (the limits' sides and the link accelerations use it). ``temperature``, ``exposure``: f32[B, L].
   """
-  forces, force_link = _link_forces(binding, wc)
+  fc, lc = _link_forces(binding, wc)
+  fl, ll = limit_forces(binding, m, d, qpos_before)
   pub = public(d).replace(qvel=qvel_before)
   link_acc = jax.vmap(lambda x: link_acceleration(binding, x))(pub)
-  return LinkSignals(forces=forces, force_link=force_link, link_acc=link_acc, temperature=temperature,
-                     exposure=exposure)
+  return LinkSignals(forces=jnp.concatenate([fc, fl], axis=1), force_link=jnp.concatenate([lc, ll], axis=1),
+                     link_acc=link_acc, temperature=temperature, exposure=exposure)
 
 
 def link_velocities(binding: "Binding", d: mjx.Data) -> jax.Array:
