@@ -1,10 +1,11 @@
 """``mjx-damage render``: a task's rollout as a video, damaged links tinted, health bars (:mod:`mjx_damage.render`).
 
     mjx-damage render --task place_plate --policy scripted:unsafe --out rollout.mp4 [--plots DIR] \
-        [--backend mjx|native]
+        [--backend mjx|native|warp]
 
 ``--backend native`` renders the same episode with its physics stepped by native
-MuJoCo (:func:`apps.resolve.on_backend`).
+MuJoCo (:func:`apps.resolve.on_backend`); ``--backend warp`` by MuJoCo Warp (a registry
+task; one device; the warp extra).
 Without ``--out`` the video goes to a new ``runs/render-<task>-<time>/rollout.mp4``; an
 existing video (or ``--plots`` folder) is refused unless ``--overwrite`` is given.
 """
@@ -14,6 +15,8 @@ from __future__ import annotations
 import os
 import sys
 import time
+
+import jax
 
 from apps import resolve as R
 from apps import training_log
@@ -32,7 +35,7 @@ def build_parser() -> Parser:
       description="Render a rollout: damaged links tinted red, health bars for every tracked entity.")
   R.add_task_policy_arguments(ap)
   R.add_task_override_arguments(ap)
-  R.add_backend_argument(ap, "the rollout the frames show is stepped by it")
+  R.add_backend_argument(ap, "the rollout the frames show is stepped by it", warp=True)
   ap.add_argument("--out", default=None,
                   help="output video, .mp4 or .gif (default: runs/render-<task>-<time>/rollout.mp4)")
   ap.add_argument("--overwrite", action="store_true", help="replace an existing --out video / --plots folder")
@@ -56,7 +59,7 @@ def main(argv=None) -> int:
   args = ap.parse_args(argv)
   try:  # everything the user gave is checked before a task is built or compiled
     R.check_task(args.task)
-    R.check_backend(args.backend)
+    R.check_backend(args.backend, warp=True)
     R.parse_policy_spec(args.policy)
     if args.out is not None:
       video.check_out(args.out)
@@ -75,7 +78,9 @@ def main(argv=None) -> int:
         raise ValueError("training_log: needs --plots DIR to write the curves to")
       training_log.find_training_log(args.training_log)
     trained = R.policy_task_kwargs(args.policy, args.task)  # a checkpoint's obs_mode …
-    env = R.make_task(args.task, **R.task_overrides(args.task, trained, args.robot, args.task_arg))
+    # --backend warp: the task is made on MuJoCo Warp with the rendered envs as its one batch
+    warp_kw = R.warp_overrides(args.task, args.backend, args.num_envs, len(jax.devices()))
+    env = R.make_task(args.task, **R.task_overrides(args.task, trained, args.robot, args.task_arg), **warp_kw)
     policy = R.make_policy(args.policy, env)
     args.backend = R.pick_backend(args.backend, env)  # auto → the backend used, as printed and recorded
     env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env
@@ -90,8 +95,6 @@ def main(argv=None) -> int:
   except RuntimeError as e:
     print(f"mjx-damage render: {e}", file=sys.stderr)
     return 1
-  import jax
-
   platform = jax.default_backend()
   print(f"render: task {args.task}, policy {args.policy}, {args.num_envs} env(s) x {steps} steps, "
         f"{args.width}x{args.height}, seed {args.seed}, backend {args.backend}, device {platform}; output {out}",

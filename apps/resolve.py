@@ -29,7 +29,7 @@ from tasks.drop import DropEnv
 from train import checkpoint as ckpt
 from train import evaluate as E
 
-BACKENDS = ("auto", "mjx", "native")  # every command; eval, sweep and bench also take "warp" (warp_overrides)
+BACKENDS = ("auto", "mjx", "native")  # every command; eval, sweep, render and bench also take "warp" (warp_overrides)
 POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint[+sample|+mean]:PATH")
 # A trained policy's action (train.networks.policy_apply): its mode (brax's deterministic policy), one sample per
 # step (the stochastic policy PPO trains), or the squashed mean.

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_damage import warp_step
 from mjx_damage.native_batch import NativeBatchEnv
 
 MODELS = ("mechanical", "thermal", "fluid")  # order of Trajectory.damage's last axis
@@ -139,7 +140,7 @@ class _Programs:
     def step_one(state, act_key, done, b, t):
       nxt = env.step(state, policy(state, jax.random.fold_in(act_key, t), b))
       # An env whose episode ended stays frozen at its final state (as train.evaluate does).
-      nxt = jax.tree.map(lambda new, old: jnp.where(done > 0, old, new), nxt, state)
+      nxt = warp_step.freeze(done > 0, state, nxt)
       rec = _record(nxt, done)
       return nxt, rec["done"], rec
 

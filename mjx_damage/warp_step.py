@@ -88,6 +88,17 @@ def is_impl_path(path) -> bool:
   return any(getattr(k, "name", None) == "_impl" for k in path)
 
 
+def freeze(finished, state, nxt):
+  """``state`` where ``finished``, else ``nxt`` (one episode's env state; vmapped over the batch).
+
+  The physics backend's private data (``pipeline_state._impl``) always comes from ``nxt``: MuJoCo
+  Warp keeps the contacts of the whole batch in one list there, with no per-episode axis to select
+  along, and nothing reads a finished episode's ``_impl`` (summaries and recordings read health,
+  metrics and public fields; a frozen episode's next step is discarded again)."""
+  return jax.tree_util.tree_map_with_path(
+      lambda path, old, new: new if is_impl_path(path) else jnp.where(finished, old, new), state, nxt)
+
+
 def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
   """``step(d, ds) -> (d, ds)`` of ONE environment that steps the whole batch at once when vmapped.
 

@@ -378,6 +378,19 @@ def test_cli_native_backend_writes_frames(backend, gl, tmp_path, capsys):
   assert "backend native" in text and "final health: plate" in text
 
 
+
+@pytest.mark.slow  # about 40 s of compiling on 2 CPU cores
+def test_cli_warp_backend_writes_frames(gl, tmp_path, capsys):
+  """--backend warp: the rollout behind the frames is a registry task stepped by MuJoCo Warp, the envs its batch."""
+  pytest.importorskip("warp", reason="warp-lang (the mjx_damage[warp] extra) is not installed")
+  out = tmp_path / "warp.gif"
+  rc = render_cli.main(["--task", "place_plate", "--robot", "gripper", "--policy", "scripted:unsafe", "--out", str(out),
+                        "--steps", "2", "--num-envs", "2", "--width", "64", "--height", "48", "--backend", "warp"])
+  assert rc == 0
+  assert len(imageio.mimread(str(out))) == 3 and os.path.exists(tmp_path / "warp_env1.gif")
+  text = capsys.readouterr().out
+  assert "backend warp" in text and "final health: plate" in text
+
 def test_native_rollout_records_the_same_episode(drop):
   """The drop fixture's episode, physics on the native backend: same keys, same fall, same broken plate."""
   from apps.resolve import make_policy, on_backend

@@ -128,24 +128,13 @@ def run_episode(env, policy: Policy, episode_length: int, key, fragility):
     nxt = env.step(state, action)
     ret = ret + jnp.where(done > 0, 0.0, nxt.info.get("task_reward", nxt.reward))
     # freeze finished episodes: their final state is the one at termination
-    state = _freeze(done > 0, state, nxt)
+    state = warp_step.freeze(done > 0, state, nxt)
     return (state, jnp.maximum(done, nxt.done), ret), None
 
   done0 = jnp.zeros((), state.done.dtype)
   ret0 = jnp.zeros((), jnp.float32)
   (state, _, ret), _ = jax.lax.scan(body, (state, done0, ret0), jnp.arange(episode_length))
   return dict(summary(state), task_return=ret)
-
-
-def _freeze(finished, state, nxt):
-  """``state`` where ``finished``, else ``nxt`` (one episode; vmapped over the batch).
-
-  The physics backend's private data (``pipeline_state._impl``) always comes from ``nxt``: MuJoCo
-  Warp keeps the contacts of the whole batch in one list there, with no per-episode axis to select
-  along, and nothing reads a finished episode's ``_impl`` (the summary reads health, metrics and
-  public fields; a frozen episode's next step is discarded again)."""
-  return jax.tree_util.tree_map_with_path(
-      lambda path, old, new: new if warp_step.is_impl_path(path) else jnp.where(finished, old, new), state, nxt)
 
 
 def summary(state) -> dict:
