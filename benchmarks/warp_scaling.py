@@ -116,13 +116,11 @@ def measure(config: str, k: int, free: int, motion: str, envs: int, nstep: int) 
   damage = config.endswith("-damage")
   if damage:
     from mjx_damage import physics, warp_step
-    from mjx_damage.backends import mjx_warp
     from mjx_damage.binding import bind
 
     binding = bind(m, S.table_config(k))
     ds = jax.vmap(lambda _: physics.init_state(binding))(jnp.arange(envs))
     if impl == "warp":
-      mjx_warp.check_supported(binding)
       slots = per_world_contacts
 
       def advance(state):

@@ -51,7 +51,6 @@ class DamageEnv(Env):
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
           raise ValueError(f"{name}: backend 'warp' needs a positive int (worlds stepped together / contact "
                            f"places per world), got {v!r}")
-      warp_step.check_supported(self.damage_binding)
       self.warp_worlds, self.warp_contacts = worlds, contacts
       sys = mjx.put_model(mj_model, impl="warp", device=device)
       # the solver's iteration-limit warnings would be printed from the kernels at every step

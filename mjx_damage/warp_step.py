@@ -55,7 +55,7 @@ def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substep
   """``n_substeps`` physics steps of a batch with damage at every one.
 
   Args:
-    m: the model put with ``impl="warp"``; binding: its :class:`Binding` (``mjx_warp.check_supported``).
+    m: the model put with ``impl="warp"``; binding: its :class:`Binding`.
     d: the batch's data (``jax.vmap(lambda _: mjx.make_data(model, impl="warp", naconmax=…))``).
     ds: a :class:`DamageState` with a leading batch axis B on every leaf.
     slots: contact places per world read for damage (static).
@@ -75,11 +75,6 @@ def step(m: mjx.Model, binding: Binding, d: mjx.Data, ds: DamageState, n_substep
   worst = jnp.zeros((d.qpos.shape[0],), jnp.int32)
   (d, ds, worst), _ = jax.lax.scan(body, (d, ds, worst), None, length=n_substeps)
   return d, ds.replace(contacts_dropped=worst), worst
-
-
-def check_supported(binding: Binding) -> None:
-  """ValueError naming what the Warp backend does not read yet (:func:`mjx_warp.check_supported`)."""
-  mjx_warp.check_supported(binding)
 
 
 def is_impl_path(path) -> bool:

@@ -109,7 +109,6 @@ def test_joint_limit_forces_and_damage_match_the_jax_implementation():
 
   model = mujoco.MjModel.from_xml_string(XML)
   binding = bind(model, CONFIG)
-  mjx_warp.check_supported(binding)  # limits are read: nothing refused
   qpos = jnp.tile(jnp.asarray(model.qpos0, jnp.float32), (2, 1)).at[:, :2].set(jnp.array([np.pi / 2, 0.1]))
   qpos = qpos.at[1, :2].set(jnp.array([SHORT, 0.05]))  # world 1: inside both ranges
   ctrl = jnp.array([[PAST, PUSH], [SHORT, 0.0]], jnp.float32)
@@ -134,7 +133,6 @@ def test_joint_limit_forces_and_damage_match_the_jax_implementation():
 def both_steps(model, config, substeps, qpos=None):
   """(MJX-JAX damage state, Warp damage state) after ``substeps`` from ``qpos`` (default qpos0), 2 envs."""
   binding = bind(model, config)
-  mjx_warp.check_supported(binding)
   qpos = jnp.tile(jnp.asarray(model.qpos0 if qpos is None else qpos, jnp.float32), (2, 1))
   ds0 = jax.vmap(lambda k: physics.init_state(binding, rng=k))(jax.random.split(jax.random.PRNGKey(0), 2))
   mj = mjx.put_model(model)

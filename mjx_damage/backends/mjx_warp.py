@@ -46,14 +46,6 @@ if TYPE_CHECKING:  # annotation only
   from mjx_damage.binding import Binding
 
 
-def check_supported(binding: "Binding") -> None:
-  """Raise ValueError naming the config part this backend does not read (before anything compiles): none now.
-
-  Kept as the one place a future unsupported part is refused; every config the JAX backend reads is read here.
-  """
-  del binding
-
-
 def _local_forces(m: mjx.Model, d: mjx.Data) -> jax.Array:
   """f32[N, 3] contact-frame force (normal, tangent 1, tangent 2) of every contact slot, N.
 
