@@ -94,6 +94,11 @@ def freeze(finished, state, nxt):
       lambda path, old, new: new if is_impl_path(path) else jnp.where(finished, old, new), state, nxt)
 
 
+def _vmapped_again(tree) -> bool:
+  """Whether an array of ``tree`` is a batch tracer, i.e. an enclosing ``jax.vmap`` is batching the caller."""
+  return any(isinstance(x, jax.core.Tracer) and hasattr(x, "batch_dim") for x in jax.tree.leaves(tree))
+
+
 def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
   """``step(d, ds) -> (d, ds)`` of ONE environment that steps the whole batch at once when vmapped.
 
@@ -101,7 +106,8 @@ def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
   evaluator), but MuJoCo Warp's contacts are one list for the batch: under ``jax.vmap`` this function's
   batching rule (``jax.custom_batching.custom_vmap``) receives the batch and runs :func:`step` on it.
   Called on one environment it runs as a batch of one. One level of vmap: the batch is the worlds that
-  ``mjx.make_data(..., impl="warp", naconmax=…)`` was vmapped over.
+  ``mjx.make_data(..., impl="warp", naconmax=…)`` was vmapped over; a second, enclosing vmap (seeds × envs)
+  raises ValueError while tracing (it would lose contact damage silently).
   """
   # not at the top: mujoco.mjx.warp.ffi imports warp-lang, an optional extra that only this backend needs
   from mujoco.mjx.warp import ffi as warp_ffi
@@ -120,6 +126,12 @@ def env_step(m: mjx.Model, binding: Binding, n_substeps: int, slots: int):
   @one.def_vmap
   def batched(axis_size, in_batched, d, ds):
     bd, bds = in_batched
+    if _vmapped_again((d.qpos, d.ctrl, ds)):
+      # An outer vmap would batch this rule's Warp calls itself: the physics comes out right, but each outer
+      # element's contact list is not the one the damage readout indexes, so contact damage would be lost.
+      raise ValueError("backend: warp steps the worlds of ONE jax.vmap; this step is vmapped twice (e.g. seeds x "
+                       "envs): vmap once over the num_envs worlds (a trainer: one seed per program), or use "
+                       "backend 'jax'")
     # a public field or damage leaf the same for every world (e.g. one ctrl for all) gets the batch axis
     d = jax.tree.map_with_path(
         lambda p, x, b: x if (b or is_impl_path(p)) else jnp.broadcast_to(x, (axis_size,) + x.shape), d, bd)

@@ -303,6 +303,19 @@ def test_a_joint_limit_task_separates_on_warp_as_on_jax():
   assert res["warp", "unsafe"]["completion"] == 1.0 and res["warp", "unsafe"]["safe_completion"] == 0.0
   np.testing.assert_allclose(res["warp", "unsafe"]["cost_mean"], res["jax", "unsafe"]["cost_mean"], rtol=0.05)
 
+
+def test_a_second_vmap_over_a_warp_env_is_refused_while_tracing():
+  """vmap(vmap(env.step)) (seeds x envs) would run the physics right but read no contact damage (each outer
+  element's contact list is not the one the readout indexes): it raises ValueError before anything compiles;
+  one vmap over the worlds traces."""
+  env = tasks.make("place_plate", robot="gripper", backend="warp", num_envs=4)
+  keys = jax.random.split(jax.random.PRNGKey(0), 4)
+  flat = jax.eval_shape(jax.vmap(env.reset), keys)
+  jax.eval_shape(jax.vmap(env.step), flat, jnp.zeros((4, env.action_size)))
+  nested = jax.eval_shape(jax.vmap(jax.vmap(env.reset)), keys.reshape(2, 2, -1))
+  with pytest.raises(ValueError, match="backend: warp steps the worlds of ONE jax.vmap"):
+    jax.eval_shape(jax.vmap(jax.vmap(env.step)), nested, jnp.zeros((2, 2, env.action_size)))
+
 def test_the_evaluator_counts_episodes_with_contacts_it_could_not_read():
   """A Warp env with too few contact places per world: the wrapper keeps each episode's worst step in
   ``damage_episode["contacts_dropped"]`` and the evaluator counts those episodes (0 on MJX-JAX)."""
