@@ -62,3 +62,18 @@ def link_forces(gen_force: jax.Array, hinge: jax.Array, axis: jax.Array, anchor:
   tangent = jnp.cross(axis, radial) / jnp.maximum(dist, LEVER_MIN)
   g = jnp.asarray(gen_force, jnp.float32)[:, None]
   return jnp.where(jnp.asarray(hinge)[:, None], g * tangent, g * axis)
+
+
+def joint_link_forces(jnt, hinge, m, d, row_force, qpos=None) -> jax.Array:
+  """World-frame force on the child link of each joint in ``jnt`` from its limit row's force, f32[J, 3] N.
+
+  Args:
+    jnt: i64[J] joint ids; hinge: bool[J] hinge (else slide).
+    m, d: one environment's model and data after a forward pass, with MuJoCo's field names
+      (``mujoco.MjModel``/``MjData`` or ``mjx.Model``/``Data``, either implementation): every backend.
+    row_force: f32[J] each joint's limit-row force (≥ 0; 0 where the limit is not active).
+    qpos: the positions that forward pass saw (default ``d.qpos``): which bound each joint is at.
+  """
+  q = (d.qpos if qpos is None else qpos)[m.jnt_qposadr[jnt]]
+  gen = limit_sign(q, m.jnt_range[jnt, 0], m.jnt_range[jnt, 1]) * row_force
+  return link_forces(gen, hinge, d.xaxis[jnt], d.xanchor[jnt], d.xipos[m.jnt_bodyid[jnt]])

@@ -29,7 +29,7 @@ from mujoco.mjx._src import constraint as mjx_constraint
 from mujoco.mjx._src import support as mjx_support
 from mujoco.mjx._src.types import ConstraintType, JointType
 
-from mjx_damage.joint_limits import limit_sign, link_forces
+from mjx_damage.joint_limits import joint_link_forces
 from mjx_damage.kinematics import link_acceleration
 from mjx_damage.signals import LinkSignals
 
@@ -96,12 +96,9 @@ def limit_forces(binding: Binding, m: mjx.Model, d: mjx.Data) -> tuple[jax.Array
   if (rows < 0).any():
     return jnp.zeros((jnt.size, 3), jnp.float32), jnp.asarray(binding.limit_link)
   q = d.qpos[m.jnt_qposadr[jnt]]
-  lo, hi = m.jnt_range[jnt, 0], m.jnt_range[jnt, 1]
-  active = jnp.minimum(q - lo, hi - q) - m.jnt_margin[jnt] < 0
-  gen = jnp.where(active, limit_sign(q, lo, hi) * d._impl.efc_force[rows], 0.0)
-  body = m.jnt_bodyid[jnt]
-  forces = link_forces(gen, binding.limit_hinge, d.xaxis[jnt], d.xanchor[jnt], d.xipos[body])
-  return forces, jnp.asarray(binding.limit_link)
+  active = jnp.minimum(q - m.jnt_range[jnt, 0], m.jnt_range[jnt, 1] - q) - m.jnt_margin[jnt] < 0
+  row_force = jnp.where(active, d._impl.efc_force[rows], 0.0)
+  return joint_link_forces(jnt, binding.limit_hinge, m, d, row_force), jnp.asarray(binding.limit_link)
 
 
 def applied_forces(binding: Binding, m: mjx.Model, d: mjx.Data) -> tuple[jax.Array, jax.Array]:

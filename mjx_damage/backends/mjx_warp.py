@@ -38,7 +38,7 @@ import numpy as np
 from flax import struct
 from mujoco import mjx
 
-from mjx_damage.joint_limits import limit_sign, link_forces
+from mjx_damage.joint_limits import joint_link_forces
 from mjx_damage.kinematics import link_acceleration, link_velocity
 from mjx_damage.signals import LinkSignals
 
@@ -166,18 +166,13 @@ def limit_forces(binding: "Binding", m: mjx.Model, d: mjx.Data, qpos_before: jax
     return jnp.zeros((B, 0, 3), jnp.float32), jnp.zeros((B, 0), jnp.int32)
   impl = d._impl
   rows = jnp.arange(impl.efc__force.shape[-1])
-  used = rows[None, :] < jnp.reshape(impl.nefc, (B, 1))  # f32[B, njmax] rows hold stale values past nefc
+  used = rows[None, :] < jnp.reshape(impl.nefc, (B, 1))  # bool[B, njmax]: rows past nefc hold stale values
   mine = (used[..., None] & (impl.efc__type[..., None] == int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT))
           & (impl.efc__id[..., None] == jnp.asarray(jnt, jnp.int32)))  # bool[B, njmax, J]
   row_force = jnp.sum(jnp.where(mine, impl.efc__force[..., None], 0.0), axis=1)  # f32[B, J], ≥ 0
 
-  def one(x, q_all, g):
-    q = q_all[m.jnt_qposadr[jnt]]
-    lo, hi = m.jnt_range[jnt, 0], m.jnt_range[jnt, 1]
-    gen = limit_sign(q, lo, hi) * g
-    return link_forces(gen, binding.limit_hinge, x.xaxis[jnt], x.xanchor[jnt], x.xipos[m.jnt_bodyid[jnt]])
-
-  forces = jax.vmap(one)(public(d), qpos_before, row_force)
+  forces = jax.vmap(lambda x, q, g: joint_link_forces(jnt, binding.limit_hinge, m, x, g, qpos=q))(
+      public(d), qpos_before, row_force)
   return forces.astype(jnp.float32), jnp.broadcast_to(jnp.asarray(binding.limit_link, jnp.int32), (B, jnt.size))
 
 

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
-from mjx_damage.joint_limits import limit_sign, link_forces
+from mjx_damage.joint_limits import joint_link_forces
 from mjx_damage.signals import LinkSignals
 
 if TYPE_CHECKING:  # annotation only
@@ -64,11 +64,7 @@ def limit_forces(binding: "Binding", model: mujoco.MjModel, data: mujoco.MjData)
   rows = np.nonzero(data.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)[0]
   by_joint = np.zeros(model.njnt)
   by_joint[data.efc_id[rows]] = data.efc_force[rows]
-  q = data.qpos[model.jnt_qposadr[jnt]]
-  lo, hi = model.jnt_range[jnt, 0], model.jnt_range[jnt, 1]
-  gen = np.asarray(limit_sign(q, lo, hi)) * by_joint[jnt]
-  body = model.jnt_bodyid[jnt]
-  forces = link_forces(gen, binding.limit_hinge, data.xaxis[jnt], data.xanchor[jnt], data.xipos[body])
+  forces = joint_link_forces(jnt, binding.limit_hinge, model, data, by_joint[jnt])
   return np.asarray(forces, np.float32), binding.limit_link.astype(np.int32)
 
 
