@@ -4,7 +4,7 @@ On disk (one HDF5 file; what robomimic/LeRobot-style readers expect, plus damage
 
     data                       attrs: env_name, env_args (JSON: env_name, type, env_kwargs),
                                       total (transitions), format, entity_names, labels (JSON)
-    data/demo_<i>              attrs: num_samples, success, safe, label
+    data/demo_<i>              attrs: num_samples
     data/demo_<i>/obs/<key>    [n, ...]  observations before the step (key "state": the env's obs)
     data/demo_<i>/actions      f32[n, A]
     data/demo_<i>/rewards      f32[n]    env reward of the step (task reward − w·cost)
@@ -13,7 +13,15 @@ On disk (one HDF5 file; what robomimic/LeRobot-style readers expect, plus damage
     data/demo_<i>/health/<entity>  f32[n]  entity health after the step, 0–100
     data/demo_<i>/damage/{mechanical,thermal,fluid}  f32[n]  damage of the step, health points
     data/demo_<i>/cost         f32[n]    total damage of the step (health points)
-    data/demo_<i>/keep         bool[n]   step usable for training (datapoint curation)
+    data/demo_<i>/keep         bool[n]   step usable for training; only where curation dropped a step
+    mask/<key>                 S[k]      robomimic filter keys, the demos (b"demo_<i>") in each:
+                                         success, safe, safe_success, label_<name> (who made them)
+
+Episode flags are robomimic filter keys (``train.py --filter_key safe_success`` trains on
+the safely completed demos) rather than per-demo attributes: a file holds thousands of
+demos, and each HDF5 object written costs ~30 µs, so four attributes and an all-True
+``keep`` per demo were a fifth of the writing time. Format 1 files (per-demo ``success``,
+``safe``, ``label`` attributes and ``keep`` in every demo) still load.
 
 In memory: :class:`Dataset`, a pytree of arrays padded to ``[E, T, ...]`` with
 ``lengths`` and ``keep`` (False past an episode's end), so curation and
@@ -42,9 +50,9 @@ import numpy as np
 
 from mjx_damage.io import atomic_path
 
-FORMAT = 1
+FORMAT = 2  # 2: episode flags under mask/, keep only where curated; 1: per-demo attributes
 DAMAGE_KINDS = ("mechanical", "thermal", "fluid")
-_STEP_ARRAYS = ("actions", "rewards", "dones", "states", "cost", "keep")
+_STEP_ARRAYS = ("actions", "rewards", "dones", "states", "cost")
 
 
 @flax.struct.dataclass
@@ -239,7 +247,7 @@ def save_chunks(path: str, chunks: Iterable[Dataset], overwrite: bool = False) -
   path = os.fspath(path)
   if os.path.exists(path) and not overwrite:
     raise ValueError(f"{path}: exists; pass overwrite=True (CLI: --overwrite) to replace it")
-  first, written, names = None, 0, ()
+  first, written, names, flags = None, 0, (), []
   with atomic_path(path, suffix=".hdf5") as tmp:
     with h5py.File(tmp, "w") as f:
       for ds in chunks:
@@ -259,9 +267,11 @@ def save_chunks(path: str, chunks: Iterable[Dataset], overwrite: bool = False) -
         names = tuple(dict.fromkeys(names + ds.label_names))
         g.attrs["labels"] = json.dumps(list(names))
         _write_demos(g, ds, start=written)
+        flags.append(_flags(ds))
         written += ds.num_episodes
       if first is None:
         raise ValueError("dataset: no episodes")
+      _write_masks(f, *(np.concatenate(x) for x in zip(*flags)))
   return written
 
 
@@ -278,22 +288,22 @@ def append(path: str, ds: Dataset) -> None:
     with h5py.File(tmp, "r+") as f:
       g = f["data"]
       g.attrs["labels"] = json.dumps(list(names))
+      g.attrs["format"] = FORMAT  # a format-1 file's demos keep their attributes; the masks now hold the flags
       _write_demos(g, ds, start=old.num_episodes)
+      _write_masks(f, *(np.concatenate(x) for x in zip(_flags(old), _flags(ds))))
 
 
 def _write_demos(g, ds: Dataset, start: int) -> None:
   """Episodes of ``ds`` as ``demo_<start + i>``, each labelled by name (``data.attrs["labels"]`` lists them)."""
   total = int(g.attrs["total"])
   ids = {}  # one HDF5 type per dtype and one dataspace per shape, shared by every object written
-  label = [np.asarray(n, dtype=_STR) for n in ds.label_names]
+  valid = np.arange(ds.keep.shape[1])[None, :] < ds.lengths[:, None]
+  curated = ~np.all(ds.keep | ~valid, axis=1)  # episodes with a dropped step: only they store keep
   for i in range(ds.num_episodes):
     n = int(ds.lengths[i])
     d = h5py.h5g.create(g.id, f"demo_{start + i}".encode())
     _attr(ids, d, b"num_samples", np.asarray(n, np.int64))
-    _attr(ids, d, b"success", np.asarray(bool(ds.success[i])))
-    _attr(ids, d, b"safe", np.asarray(bool(ds.safe[i])))
-    _attr(ids, d, b"label", label[int(ds.labels[i])] if label else np.asarray("", dtype=_STR))
-    for k in _STEP_ARRAYS:
+    for k in _STEP_ARRAYS + (("keep",) if curated[i] else ()):
       _put(ids, d, k.encode(), getattr(ds, k)[i, :n])
     for sub in ("obs", "health", "damage"):
       s = h5py.h5g.create(d, sub.encode())
@@ -303,11 +313,10 @@ def _write_demos(g, ds: Dataset, start: int) -> None:
   g.attrs["total"] = total
 
 
-# The writers use h5py's low-level API with shared type and dataspace ids: a file holds ~20 objects per
+# The writers use h5py's low-level API with shared type and dataspace ids: a file holds ~16 objects per
 # episode, and h5py's high-level wrappers (plus a fresh type and dataspace per object) cost about as much
 # as HDF5 itself (2.66 s vs 4.3 s for 4096 pick_egg episodes). They write what the high-level API writes
 # (same types, contiguous layout), so readers see no difference.
-_STR = h5py.string_dtype()  # variable-length UTF-8, as h5py stores a Python str attribute
 
 
 def _type_space(ids: dict, dtype, shape):
@@ -329,6 +338,30 @@ def _put(ids: dict, group, name: bytes, a: np.ndarray) -> None:
   dset = h5py.h5d.create(group, name, *_type_space(ids, a.dtype, a.shape))
   if a.size:
     dset.write(h5py.h5s.ALL, h5py.h5s.ALL, a)
+
+
+def _flags(ds: Dataset) -> tuple:
+  """Per episode: success bool[E], safe bool[E], label name S[E] (``b""`` without label names)."""
+  if ds.label_names:
+    labels = np.asarray([n.encode() for n in ds.label_names])[np.asarray(ds.labels)]
+  else:
+    labels = np.full(ds.num_episodes, b"")
+  return np.asarray(ds.success, bool), np.asarray(ds.safe, bool), labels
+
+
+MASK_PREFIX = "label_"
+
+
+def _write_masks(f, success, safe, labels) -> None:
+  """``mask/<key>``: robomimic filter keys (demo names) for the episode flags, replacing any there."""
+  demos = np.char.add(b"demo_", np.arange(len(success)).astype("S"))
+  if "mask" in f:
+    del f["mask"]
+  m = f.create_group("mask")
+  keys = {"success": success, "safe": safe, "safe_success": success & safe}
+  keys.update({MASK_PREFIX + n.decode(): labels == n for n in dict.fromkeys(labels.tolist()) if n})
+  for k, member in keys.items():
+    m.create_dataset(k, data=demos[member])
 
 
 def _check_self(ds: Dataset) -> None:
@@ -372,6 +405,9 @@ def _read(f, path: str, task: Optional[str]) -> Dataset:
   for a in ("env_name", "entity_names", "labels"):
     if a not in g.attrs:
       raise ValueError(f"{path}: wrong layout: data.attrs lacks {a!r} (not written by mjx_damage.data?)")
+  fmt = int(g.attrs.get("format", 1))
+  if fmt > FORMAT:
+    raise ValueError(f"{path}: format {fmt}, newer than this mjx_damage reads ({FORMAT}); upgrade mjx_damage")
   env_name = str(g.attrs["env_name"])
   if task is not None and env_name != task:
     raise ValueError(f"{path}: dataset of task {env_name!r}, expected {task!r}")
@@ -388,12 +424,15 @@ def _read(f, path: str, task: Optional[str]) -> Dataset:
   lengths = np.asarray([int(g[k].attrs["num_samples"]) for k in demos], np.int32)
   t_max = int(lengths.max())
 
-  def stack(key):
+  def stack(key, default=None):
     out = None
     for i, k in enumerate(demos):
-      if key not in g[k]:
+      if key in g[k]:
+        a = g[k][key][()]
+      elif default is not None:
+        a = np.full(lengths[i], default)
+      else:
         raise ValueError(f"{path}: {k} lacks {key!r}")
-      a = g[k][key][()]
       if a.shape[0] != lengths[i]:
         raise ValueError(f"{path}: {k}/{key} has {a.shape[0]} steps, num_samples says {lengths[i]}")
       if out is None:
@@ -403,10 +442,7 @@ def _read(f, path: str, task: Optional[str]) -> Dataset:
       out[i, : lengths[i]] = a
     return out
 
-  labels_attr = [str(g[k].attrs.get("label", "")) for k in demos]
-  for lab in labels_attr:
-    if label_names and lab not in label_names:
-      raise ValueError(f"{path}: demo label {lab!r} not in data.attrs labels {list(label_names)}")
+  success, safe, labels = (_read_masks if fmt >= 2 else _read_attrs)(f, path, demos, label_names)
   return Dataset(
       obs={k: stack(f"obs/{k}") for k in obs_keys},
       actions=stack("actions"),
@@ -416,12 +452,48 @@ def _read(f, path: str, task: Optional[str]) -> Dataset:
       health={e: stack(f"health/{e}") for e in entities},
       damage={k: stack(f"damage/{k}") for k in DAMAGE_KINDS},
       cost=stack("cost"),
-      keep=stack("keep").astype(bool),
+      keep=stack("keep", default=True).astype(bool),
       lengths=lengths,
-      success=np.asarray([bool(g[k].attrs["success"]) for k in demos]),
-      safe=np.asarray([bool(g[k].attrs["safe"]) for k in demos]),
-      labels=np.asarray([label_names.index(lab) if label_names else 0 for lab in labels_attr], np.int32),
+      success=success,
+      safe=safe,
+      labels=labels,
       env_name=env_name,
       env_config=config_json(env_args.get("env_kwargs", {})),
       label_names=label_names,
   )
+
+
+def _read_masks(f, path: str, demos: list, label_names: tuple) -> tuple:
+  """Format 2: success, safe bool[E] and labels i32[E] from the ``mask/`` filter keys."""
+  names = np.asarray(demos, dtype="S")
+
+  def member(key, required=True):
+    if f"mask/{key}" not in f:
+      if required:
+        raise ValueError(f"{path}: wrong layout: no 'mask/{key}' (the demos' episode flags)")
+      return np.zeros(len(demos), bool)
+    return np.isin(names, f[f"mask/{key}"][()])
+
+  success, safe = member("success"), member("safe")
+  labels = np.zeros(len(demos), np.int32)
+  if label_names:
+    by_label = np.stack([member(MASK_PREFIX + n, required=False) for n in label_names])
+    count = by_label.sum(0)
+    if np.any(count != 1):
+      bad = demos[int(np.flatnonzero(count != 1)[0])]
+      raise ValueError(f"{path}: wrong layout: {bad} is in {int(count[demos.index(bad)])} of the "
+                       f"mask/{MASK_PREFIX}<name> keys (each demo has one label)")
+    labels = np.argmax(by_label, axis=0).astype(np.int32)
+  return success, safe, labels
+
+
+def _read_attrs(f, path: str, demos: list, label_names: tuple) -> tuple:
+  """Format 1: success, safe bool[E] and labels i32[E] from each demo's attributes."""
+  g = f["data"]
+  labels = [str(g[k].attrs.get("label", "")) for k in demos]
+  for lab in labels:
+    if label_names and lab not in label_names:
+      raise ValueError(f"{path}: demo label {lab!r} not in data.attrs labels {list(label_names)}")
+  return (np.asarray([bool(g[k].attrs["success"]) for k in demos]),
+          np.asarray([bool(g[k].attrs["safe"]) for k in demos]),
+          np.asarray([label_names.index(lab) if label_names else 0 for lab in labels], np.int32))

@@ -1,5 +1,7 @@
 """mjx_damage.data: lossless HDF5 round trip in the robomimic layout, append, and bad-input errors."""
 
+import json
+
 import h5py
 import jax
 import numpy as np
@@ -64,9 +66,75 @@ def test_file_is_robomimic_layout(tmp_path):
     assert demo["dones"][-1] == 1 and demo["dones"][:-1].sum() == 0
     assert set(demo["damage"]) == set(D.DAMAGE_KINDS) and set(demo["health"]) == {"egg", "agent"}
     # written through h5py's low-level API, read back as the high-level API would have stored them
-    assert isinstance(demo.attrs["label"], str) and demo.attrs["label"] == ds.label_names[int(ds.labels[1])]
-    assert type(demo.attrs["success"]) is np.bool_ and type(demo.attrs["num_samples"]) is np.int64
+    assert type(demo.attrs["num_samples"]) is np.int64
     assert demo["actions"].dtype == np.float32 and demo["actions"].chunks is None  # contiguous
+    assert "keep" not in demo  # nothing curated out: keep is implied
+    # episode flags as robomimic filter keys: mask/<key> lists the demos in it
+    names = lambda key: sorted(int(n[5:]) for n in f[f"mask/{key}"][()])
+    assert names("success") == np.flatnonzero(ds.success).tolist()
+    assert names("safe") == np.flatnonzero(ds.safe).tolist()
+    assert names("safe_success") == np.flatnonzero(ds.success & ds.safe).tolist()
+    for i, label in enumerate(ds.label_names):
+      assert names("label_" + label) == np.flatnonzero(ds.labels == i).tolist()
+
+
+def test_curated_steps_round_trip(tmp_path):
+  ds = hand_made()
+  keep = np.array(ds.keep)
+  keep[0, 2:4] = False  # datapoint curation dropped two steps of demo 0
+  ds = ds.replace(keep=keep)
+  D.save(tmp_path / "curated.hdf5", ds)
+  assert_same(ds, D.load(tmp_path / "curated.hdf5"))
+  with h5py.File(tmp_path / "curated.hdf5", "r") as f:
+    assert "keep" in f["data/demo_0"] and "keep" not in f["data/demo_1"]
+
+
+def write_format_1(path, ds):
+  """The layout of format 1 (per-demo success/safe/label attributes, keep in every demo), high-level h5py."""
+  with h5py.File(path, "w") as f:
+    g = f.create_group("data")
+    g.attrs.update({"env_name": ds.env_name, "entity_names": json.dumps(list(ds.health)), "format": 1,
+                    "labels": json.dumps(list(ds.label_names)), "total": int(ds.lengths.sum()),
+                    "env_args": json.dumps({"env_name": ds.env_name, "env_kwargs": json.loads(ds.env_config)})})
+    for i, n in enumerate(ds.lengths):
+      d = g.create_group(f"demo_{i}")
+      d.attrs.update({"num_samples": int(n), "success": bool(ds.success[i]), "safe": bool(ds.safe[i]),
+                      "label": ds.label_names[int(ds.labels[i])]})
+      for k in ("actions", "rewards", "dones", "states", "cost", "keep"):
+        d[k] = getattr(ds, k)[i, :n]
+      for sub in ("obs", "health", "damage"):
+        for k, v in getattr(ds, sub).items():
+          d[f"{sub}/{k}"] = v[i, :n]
+
+
+def test_format_1_files_load_and_append(tmp_path):
+  a, b = hand_made(seed=5), hand_made(e=3, seed=6, labels=("careless", "other"))
+  path = tmp_path / "old.hdf5"
+  write_format_1(path, a)
+  assert_same(a, D.load(path))
+  D.append(path, b)
+  assert_same(D.concat([a, b]), D.load(path))
+  with h5py.File(path, "r") as f:
+    assert f["data"].attrs["format"] == D.FORMAT and len(f["mask/success"]) == int(a.success.sum() + b.success.sum())
+
+
+def test_bad_masks_name_the_cause(tmp_path):
+  ds = hand_made()
+  path = tmp_path / "demos.hdf5"
+  D.save(path, ds)
+  with h5py.File(path, "r+") as f:
+    del f["mask/label_careful"]
+    f["mask/label_careful"] = np.asarray([b"demo_0", b"demo_1", b"demo_2", b"demo_3", b"demo_4"])
+  with pytest.raises(ValueError, match="is in 2 of the mask/label_<name> keys"):
+    D.load(path)
+  with h5py.File(path, "r+") as f:
+    del f["mask/success"]
+  with pytest.raises(ValueError, match="no 'mask/success'"):
+    D.load(path)
+  with h5py.File(path, "r+") as f:
+    f["data"].attrs["format"] = D.FORMAT + 1
+  with pytest.raises(ValueError, match=f"format {D.FORMAT + 1}, newer than"):
+    D.load(path)
 
 
 def test_append_and_concat_agree(tmp_path):
