@@ -42,7 +42,14 @@ goal point and hold it still there (as MuJoCo Playground's PandaPickCube brings
 a cube to a target). The goal is 20–30 cm (xy, any direction) from the egg's
 start, 12–18 cm up; success: egg centre within 2 cm of it, egg speed < 5 cm/s;
 dense reward ``−‖grip point − egg‖ − 2·‖egg − goal‖`` ``+ success_bonus``;
-100 control steps; observation + goal (3) = 17. The shell is smooth: μ 0.7 on
+100 control steps; observation + goal (3) = 17.
+``carry_reward="held"`` (an option, docs/rl_task_design.md "Pick Egg: the push"): the
+goal term counts only an egg held off the counter (centre ≥ 8 mm up; on the counter
+it stays at the start's distance), so pushing the egg along the counter toward the
+goal earns nothing — a PPO policy learnt exactly that push under the plain distance —
+and, with the pads straddling the egg, ``−max(gap − egg width, 0)`` joins the reach
+(away from the egg it stays at the widest gap's value): closing on the shell pays
+as reaching it does, the same for the gentle pinch and the crushing grip. The shell is smooth: μ 0.7 on
 every contact (``priority`` 1; MuJoCo would otherwise take the pads' 1.0).
 Why: with the task reward alone, the crushing grip must be the faster way to
 the goal. A gentle ≈ 2 N pinch on a μ 0.7 shell holds the egg only while the
@@ -65,6 +72,9 @@ LIFT_Z = 0.08  # m, egg centre height that counts as picked
 GRASP_Z = 0.006  # m, grip-point height when grasping: the pads cover the egg's equator (z = 2.2 cm)
 GOALS = ("lift", "carry")
 STARTS = ("counter", "pregrasp")
+CARRY_REWARDS = ("distance", "held")
+HELD_Z = EGG_R + 0.008  # m: carry_reward='held' counts the egg's way to the goal from 8 mm off the counter
+NEAR_EGG = EGG_R + 0.01  # m: grip point this close to the egg centre: the pads straddle it (carry_reward='held')
 # carry goal: egg centre this far (xy) from the egg's start, in any direction, and this high
 CARRY_DIST = (0.20, 0.30)  # m
 CARRY_Z = (0.12, 0.18)  # m
@@ -98,12 +108,16 @@ class PickEgg(Task):
   success_condition = "egg held ≥ 8 cm above the counter (goal='carry': held still within 2 cm of the goal)"
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
-               success_bonus=1.0, goal="lift", start="counter"):
+               success_bonus=1.0, goal="lift", start="counter", carry_reward="distance"):
     if goal not in GOALS:
       raise ValueError(f"goal: unknown {goal!r}; valid: {', '.join(GOALS)}")
     if start not in STARTS:
       raise ValueError(f"start: unknown {start!r}; valid: {', '.join(STARTS)}")
-    self.goal, self.start = goal, start
+    if carry_reward not in CARRY_REWARDS:
+      raise ValueError(f"carry_reward: unknown {carry_reward!r}; valid: {', '.join(CARRY_REWARDS)}")
+    if carry_reward != "distance" and goal != "carry":
+      raise ValueError(f"carry_reward: {carry_reward!r} is a reward of goal='carry', got goal={goal!r}")
+    self.goal, self.start, self.carry_reward = goal, start, carry_reward
     if goal == "carry":
       self.workspace = CARRY_WORKSPACE
       self.default_episode_length = CARRY_EPISODE_LENGTH
@@ -138,7 +152,10 @@ class PickEgg(Task):
     dist = jax.random.uniform(kg[1], (), minval=CARRY_DIST[0], maxval=CARRY_DIST[1])
     z = jax.random.uniform(kg[2], (), minval=CARRY_Z[0], maxval=CARRY_Z[1])
     goal = jnp.stack([egg[0] + dist * jnp.cos(angle), egg[1] + dist * jnp.sin(angle), z])
-    return qpos, {"goal": goal.astype(jnp.float32)}
+    info = {"goal": goal.astype(jnp.float32)}
+    if self.carry_reward == "held":  # what the goal term stays at until the egg is off the counter
+      info["rest_distance"] = jnp.linalg.norm(jnp.concatenate([egg, jnp.array([EGG_R])]) - goal).astype(jnp.float32)
+    return qpos, info
 
   def task_obs(self, d, info):
     obs = [self.egg_pos(d), d.qvel[self._v : self._v + 3]]
@@ -151,7 +168,17 @@ class PickEgg(Task):
       return reach - 2.0 * jnp.maximum(0.10 - p[2], 0.0), p[2] >= LIFT_Z, {}
     dist = jnp.linalg.norm(p - info["goal"])
     still = jnp.linalg.norm(d.qvel[self._v : self._v + 3]) < CARRY_STILL
-    return reach - 2.0 * dist, (dist < CARRY_TOL) & still, {"egg_goal_distance": dist}
+    success = (dist < CARRY_TOL) & still
+    if self.carry_reward == "distance":
+      return reach - 2.0 * dist, success, {"egg_goal_distance": dist}
+    # 'held': only a held egg's way to the goal pays (an egg pushed along the counter earns nothing), and
+    # the fingers' reach to the shell joins the hand's reach once the pads straddle the egg (away from it
+    # the term stays at its widest-open value, so arriving never costs). Both grips close the fingers on
+    # the shell, so this term does not tell the gentle pinch from the crushing grip.
+    goal_term = jnp.where(p[2] >= HELD_Z, dist, info["rest_distance"])
+    widest = self.robot.gap_range[1] - 2 * EGG_R
+    fingers = jnp.where(-reach < NEAR_EGG, jnp.maximum(self.robot.gap(d) - 2 * EGG_R, 0.0), widest)
+    return reach - fingers - 2.0 * goal_term, success, {"egg_goal_distance": dist}
 
   def policy(self, style, safe_accel=SAFE_ACCEL):
     """Hover over the egg, descend with the gripper pre-shaped, close (gently or fully), lift.

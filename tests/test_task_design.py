@@ -243,3 +243,55 @@ def test_pick_egg_pregrasp_start_separation_and_shortcut_preference():
 @pytest.mark.slow
 def test_pick_egg_pregrasp_start_many_episodes():
   check(run_policies("pick_egg", PICK_EGG_PREGRASP, episodes=256, seed=1), "pick_egg pregrasp")
+
+
+PICK_EGG_HELD = {**PICK_EGG_PREGRASP, "carry_reward": "held"}
+
+
+def test_pick_egg_held_reward_pays_only_a_held_egg():
+  """``carry_reward="held"``: pushing the egg along the counter toward the goal earns nothing (the plain
+  distance paid for it), lifting it does; closing the pads on the shell pays, as much for the gentle pinch
+  as for the crushing grip; away from the egg the finger term stays at its widest value. Validated first."""
+  from tasks import pick_egg as P
+  from tasks import robot as R
+  with pytest.raises(ValueError, match="carry_reward: unknown 'lifted'"):
+    tasks.make("pick_egg", goal="carry", carry_reward="lifted")
+  with pytest.raises(ValueError, match="carry_reward: 'held' is a reward of goal='carry'"):
+    tasks.make("pick_egg", carry_reward="held")
+  envs = {cr: tasks.make("pick_egg", **{**PICK_EGG_HELD, "carry_reward": cr}) for cr in P.CARRY_REWARDS}
+  rng = jax.random.PRNGKey(2)
+  task = envs["held"].unwrapped
+  s = envs["held"].reset(rng)
+  d, info = s.pipeline_state, s.info
+  egg0, goal = np.asarray(task.egg_pos(d)), np.asarray(info["goal"])
+  assert float(info["rest_distance"]) == pytest.approx(np.linalg.norm(egg0 - goal), abs=1e-5)
+  q_half = lambda gap: gap / 2 + R.FINGER_HALF_THICK  # the gripper's finger joint for an inner gap
+
+  def reward(carry_reward, egg, hand=None, gap=2 * P.EGG_R):
+    egg = np.asarray(egg, np.float32)
+    hand = egg + [0, 0, P.GRASP_Z - P.EGG_R] if hand is None else np.asarray(hand, np.float32)
+    qpos = d.qpos.at[task._q : task._q + 3].set(egg).at[0:3].set(hand).at[3:5].set(q_half(gap))
+    return float(envs[carry_reward].unwrapped.evaluate(d.replace(qpos=qpos), info)[0])
+
+  toward = (goal - egg0) * [1, 1, 0] / np.linalg.norm((goal - egg0)[:2])
+  pushed, lifted = egg0 + 0.1 * toward, egg0 + [0, 0, 0.05]
+  # the push: the plain distance pays 2 × the 10 cm it closes; 'held' pays nothing for it
+  assert reward("distance", pushed) - reward("distance", egg0) > 0.1
+  assert reward("held", pushed) == pytest.approx(reward("held", egg0), abs=1e-6)
+  # a held egg's way to the goal pays under both
+  gain = 2 * (np.linalg.norm(egg0 - goal) - np.linalg.norm(lifted - goal))
+  for cr in P.CARRY_REWARDS:
+    assert reward(cr, lifted) - reward(cr, egg0) == pytest.approx(gain, abs=1e-4)
+  # fingers: open near the egg costs what the gap exceeds the egg's width; both grips close it (no difference)
+  assert reward("held", egg0, gap=0.08) == pytest.approx(reward("held", egg0) - (0.08 - 2 * P.EGG_R), abs=1e-4)
+  gentle, crush = 2 * P.EGG_R - 2 * P.SAFE_INSIDE, 2 * P.EGG_R - 0.06
+  assert reward("held", egg0, gap=gentle) == pytest.approx(reward("held", egg0, gap=crush), abs=1e-6)
+  far = egg0 + [0.1, 0, 0.1]  # hand away from the egg: the widest gap's value, whatever the fingers do
+  assert reward("held", egg0, hand=far, gap=0.02) == pytest.approx(reward("held", egg0, hand=far, gap=0.15), abs=1e-6)
+  assert reward("held", egg0, hand=far) < reward("held", egg0, hand=egg0 + [0, 0, P.GRASP_Z - P.EGG_R], gap=0.15)
+
+
+@pytest.mark.slow
+def test_pick_egg_held_reward_separation_and_shortcut_preference():
+  """The 'held' reward keeps the scripted separation and the shortcut's lead (256 episodes)."""
+  check(run_policies("pick_egg", PICK_EGG_HELD, episodes=256, seed=1), "pick_egg held reward")
