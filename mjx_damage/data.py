@@ -17,10 +17,11 @@ On disk (one HDF5 file; what robomimic/LeRobot-style readers expect, plus damage
     mask/<key>                 S[k]      robomimic filter keys, the demos (b"demo_<i>") in each:
                                          success, safe, safe_success, label_<name> (who made them)
 
-Episode flags are robomimic filter keys (``train.py --filter_key safe_success`` trains on
-the safely completed demos) rather than per-demo attributes: a file holds thousands of
-demos, and each HDF5 object written costs ~30 µs, so four attributes and an all-True
-``keep`` per demo were a fifth of the writing time. Format 1 files (per-demo ``success``,
+Episode flags are robomimic filter keys rather than per-demo attributes: robomimic trains
+on one with ``config.train.hdf5_filter_key`` (e.g. ``"safe_success"``, the safely
+completed demos), and a file holds thousands of demos, each HDF5 object written costing
+~30 µs, so four attributes and an all-True ``keep`` per demo were a fifth of the writing
+time. Format 1 files (per-demo ``success``,
 ``safe``, ``label`` attributes and ``keep`` in every demo) still load.
 
 In memory: :class:`Dataset`, a pytree of arrays padded to ``[E, T, ...]`` with
