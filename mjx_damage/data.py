@@ -20,8 +20,8 @@ On disk (one HDF5 file; what robomimic/LeRobot-style readers expect, plus damage
 Episode flags are robomimic filter keys rather than per-demo attributes: robomimic trains
 on one with ``config.train.hdf5_filter_key`` (e.g. ``"safe_success"``, the safely
 completed demos), and a file holds thousands of demos, each HDF5 object written costing
-~30 µs, so four attributes and an all-True ``keep`` per demo were a fifth of the writing
-time. Format 1 files (per-demo ``success``,
+20–50 µs, so four attributes and an all-True ``keep`` per demo were a quarter of the
+writing time (benchmarks/dataset_writer.py). Format 1 files (per-demo ``success``,
 ``safe``, ``label`` attributes and ``keep`` in every demo) still load.
 
 In memory: :class:`Dataset`, a pytree of arrays padded to ``[E, T, ...]`` with
