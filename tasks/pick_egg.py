@@ -180,19 +180,22 @@ class PickEgg(Task):
     fingers = jnp.where(-reach < NEAR_EGG, jnp.maximum(self.robot.gap(d) - 2 * EGG_R, 0.0), widest)
     return reach - fingers - 2.0 * goal_term, success, {"egg_goal_distance": dist}
 
-  def policy(self, style, safe_accel=SAFE_ACCEL):
+  def policy(self, style, safe_accel=SAFE_ACCEL, safe_inside=SAFE_INSIDE):
     """Hover over the egg, descend with the gripper pre-shaped, close (gently or fully), lift.
 
     ``goal="carry"``: carry the egg to the goal instead of lifting it; the unsafe (crushing) grip at the
     hand's full speed, the safe (gentle) one with acceleration and braking limited to ``safe_accel`` (m/s²;
-    0: the unsafe carry's full speed, with the gentle grip).
+    0: the unsafe carry's full speed, with the gentle grip). ``safe_inside`` (m): the gentle close's target
+    inside the shell on each side (the finger servo's squeeze grows with it; benchmarks/egg_grip_sweep.py).
     """
     if style not in ("safe", "unsafe"):
       raise ValueError(f"style: must be 'safe' or 'unsafe', got {style!r}")
     if isinstance(safe_accel, bool) or not isinstance(safe_accel, (int, float)) or not 0.0 <= safe_accel < 1e3:
       raise ValueError(f"safe_accel: must be a number in [0, 1000) m/s², got {safe_accel!r}")
+    if isinstance(safe_inside, bool) or not isinstance(safe_inside, (int, float)) or not 0.0 <= safe_inside <= EGG_R:
+      raise ValueError(f"safe_inside: must be a number in [0, {EGG_R}] m, got {safe_inside!r}")
     preshape = R.gripper_command_for_gap(2 * EGG_R + 0.02, self.robot)
-    close = R.gripper_command_for_gap(2 * (EGG_R - SAFE_INSIDE), self.robot) if style == "safe" else -1.0
+    close = R.gripper_command_for_gap(2 * (EGG_R - safe_inside), self.robot) if style == "safe" else -1.0
     robot, carry, safe = self.robot, self.goal == "carry", style == "safe"
     full_speed = R.MAX_STEP / robot.control_dt  # m/s of a full action
     accel = float(safe_accel)
