@@ -1,4 +1,4 @@
-"""benchmarks/egg_grip_sweep.py and the safe policy's closing depth it sweeps (tasks.pick_egg)."""
+"""benchmarks/egg_grip_sweep.py, benchmarks/egg_exploration.py and the safe policy's closing depth (tasks.pick_egg)."""
 
 import math
 
@@ -67,3 +67,40 @@ def test_tiny_sweep_the_gentle_grip_carries_safely_and_a_deep_one_crushes(sweep,
   assert gentle["return_penalised"] > deep["return_penalised"] + 100  # the penalty's verdict
   assert res["window"]["inside_mm"] == [5.0, 5.0] and res["window"]["width"] == 0.0
   assert "Safe window" in (tmp_path / "egg_grip_sweep_t.md").read_text()
+
+
+@pytest.fixture(scope="module")
+def exploration():
+  import sys
+  sys.path.insert(0, BENCHMARKS)
+  try:
+    yield load_benchmark("egg_exploration")
+  finally:
+    sys.path.remove(BENCHMARKS)
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["--grip-log-stds", "nan"], "grip_log_stds"), (["--grip-log-stds", "-9"], "grip_log_stds"),
+    (["--grip-log-stds", "x"], "grip_log_stds"), (["--episodes", "0"], "episodes"),
+    (["--task-settings", '{"start": "counter"}'], "task_settings"), (["--task-settings", "[]"], "task_settings")])
+def test_exploration_bad_arguments_are_refused_naming_the_field(exploration, tmp_path, argv, field):
+  with pytest.raises(ValueError, match=field):
+    exploration.main(argv + ["--results-dir", str(tmp_path)])
+  assert not list(tmp_path.iterdir())
+
+
+def test_exploration_tiny_run_counts_rises_consistently(exploration, tmp_path):
+  """Four episodes per setting: the shares are of those episodes, a higher rise is never more common than a
+  lower one, and a near-deterministic gripper at the shell (log-std -5) is a setting like any other."""
+  exploration.main(["--episodes", "4", "--grip-log-stds=-5,0", "--results-dir", str(tmp_path), "--tag", "t"])
+  import json
+  res = json.loads((tmp_path / "egg_exploration_t.json").read_text())
+  assert [(r["gripper_mean"], r["gripper_log_std"]) for r in res["rows"]] == [
+      ("untrained (open)", -5.0), ("untrained (open)", 0.0), ("at the shell", -5.0), ("at the shell", 0.0)]
+  for r in res["rows"]:
+    shares = [r["rose_1mm_pct"], r["rose_8mm_pct"], r["rose_30mm_pct"]]
+    assert all(s in (0.0, 25.0, 50.0, 75.0, 100.0) for s in shares + [r["egg_health_lost_pct"]])
+    assert shares == sorted(shares, reverse=True)
+    assert r["mean_highest_rise_mm"] > -1.0  # the egg rests on the counter, never below it
+  assert res["rows"][2]["gripper_mean_command"] == pytest.approx(-0.468, abs=1e-3)  # the egg's width
+  assert "how often does exploration lift the egg" in (tmp_path / "egg_exploration_t.md").read_text()
