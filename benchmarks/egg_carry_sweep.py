@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -33,9 +31,8 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import reward_preference as RP  # noqa: E402  (the sibling benchmark: its git helper)
+import reward_preference as RP  # noqa: E402  (the sibling benchmark: its results writer)
 import tasks  # noqa: E402
-from mjx_damage.io import write_json, write_text  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 GAMMAS = (0.97, 0.99)
@@ -126,13 +123,8 @@ def main(argv=None) -> int:
   res = run(a.episodes, accels, a.seed, a.robot)
   if a.robot != "gripper":  # the gripper's results stay as committed (no key, same file)
     res["robot"] = a.robot
-  res.update(command="PYTHONPATH=. .venv/bin/python benchmarks/egg_carry_sweep.py " + " ".join(
-      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])), jax=jax.__version__,
-      backend=jax.default_backend(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), git=RP._git())
   stem = os.path.join(RESULTS, "egg_carry_sweep" + ("" if a.robot == "gripper" else f"_{a.robot}"))
-  write_json(stem + ".json", res)
-  write_text(stem + ".md", render_md(res))
-  print(f"wrote {stem}.json / .md")
+  RP.save_results(res, "egg_carry_sweep", argv, stem, render_md)
   return 0
 
 

@@ -28,9 +28,7 @@ import argparse
 import json
 import math
 import os
-import shlex
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -40,9 +38,8 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import reward_preference as RP  # noqa: E402  (the sibling benchmark: its rollouts, returns and git helper)
+import reward_preference as RP  # noqa: E402  (the sibling benchmark: its rollouts, returns and results writer)
 import tasks  # noqa: E402
-from mjx_damage.io import write_json, write_text  # noqa: E402
 from tasks import pick_egg as P  # noqa: E402
 from tasks import robot as R  # noqa: E402
 
@@ -163,13 +160,8 @@ def main(argv=None) -> int:
   if settings.get("goal") != "carry":
     raise ValueError(f"task_settings: the sweep is of the carry (goal='carry'), got goal={settings.get('goal')!r}")
   res = run(a.episodes, insides, accels, a.seed, settings, a.damage_weight)
-  res.update(command="PYTHONPATH=. .venv/bin/python benchmarks/egg_grip_sweep.py " + " ".join(
-      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])), jax=jax.__version__,
-      backend=jax.default_backend(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), git=RP._git())
   stem = os.path.join(a.results_dir, "egg_grip_sweep" + (f"_{a.tag}" if a.tag else ""))
-  write_json(stem + ".json", res)
-  write_text(stem + ".md", render_md(res))
-  print(f"wrote {stem}.json / .md")
+  RP.save_results(res, "egg_grip_sweep", argv, stem, render_md)
   return 0
 
 

@@ -292,6 +292,17 @@ def _git() -> str:
     return "unknown"
 
 
+def save_results(res: dict, script: str, argv, stem: str, render) -> None:
+  """Stamp ``res`` with what made it (the command ``benchmarks/<script>.py ARGV``, jax, backend, date, git)
+  and write ``stem``.json and ``stem``.md (``render(res)``). For this benchmark's siblings."""
+  res.update(command=f"PYTHONPATH=. .venv/bin/python benchmarks/{script}.py " + " ".join(
+      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])), jax=jax.__version__,
+      backend=jax.default_backend(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), git=_git())
+  write_json(stem + ".json", res)
+  write_text(stem + ".md", render(res))
+  print(f"wrote {stem}.json / .md")
+
+
 def parse_args(argv=None):
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--tasks", default=",".join(RL_TASKS))
