@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
-import shlex
 import subprocess
 import sys
 import tempfile
@@ -36,6 +35,7 @@ sys.path.insert(0, ROOT)
 import h5py  # noqa: E402
 import numpy as np  # noqa: E402
 
+import provenance  # noqa: E402  (the sibling module: command, git, date)
 from mjx_damage import data as D  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 
@@ -128,11 +128,8 @@ def main(argv=None) -> int:
   rows = [{"writer": k, "median_tr_s": float(np.median(v)), "min_tr_s": float(min(v)), "max_tr_s": float(max(v)),
            "rates": v} for k, v in rates.items()]
   res = {"episodes": a.episodes, "steps": T, "repeats": a.repeats, "rows": rows, "objects": objects,
-         "command": "PYTHONPATH=. .venv/bin/python benchmarks/dataset_writer.py " + " ".join(
-             shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])),
-         "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "cpus": os.cpu_count(),
-         "git": subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True,
-                               text=True).stdout.strip()}
+         "command": provenance.command("dataset_writer", argv),
+         "date": provenance.now(), "cpus": os.cpu_count(), "git": provenance.git()}
   lines = ["# Dataset writer: transitions/s and the cost of an HDF5 object", "",
            f"Command: `{res['command']}`  ", f"{res['date']}, git {res['git']}, {res['cpus']} CPUs. "
            f"{a.episodes} synthetic pick_egg-shaped episodes of {T} steps per save, {a.repeats} saves per writer, "

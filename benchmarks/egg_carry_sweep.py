@@ -31,7 +31,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import reward_preference as RP  # noqa: E402  (the sibling benchmark: its results writer)
+import provenance  # noqa: E402  (the sibling module: the results writer)
 import tasks  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
@@ -124,7 +124,7 @@ def main(argv=None) -> int:
   if a.robot != "gripper":  # the gripper's results stay as committed (no key, same file)
     res["robot"] = a.robot
   stem = os.path.join(RESULTS, "egg_carry_sweep" + ("" if a.robot == "gripper" else f"_{a.robot}"))
-  RP.save_results(res, "egg_carry_sweep", argv, stem, render_md)
+  provenance.save_results(res, "egg_carry_sweep", argv, stem, render_md)
   return 0
 
 

@@ -34,7 +34,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import reward_preference as RP  # noqa: E402  (the sibling benchmark: its results writer)
+import provenance  # noqa: E402  (the sibling module: the results writer)
 import tasks  # noqa: E402
 from tasks import pick_egg as P  # noqa: E402
 from tasks import robot as R  # noqa: E402
@@ -127,7 +127,7 @@ def main(argv=None) -> int:
   grip_means = {"untrained (open)": 0.0, "at the shell": float(R.gripper_command_for_gap(2 * P.EGG_R, robot))}
   res = run(a.episodes, grip_means, stds, a.seed, settings)
   stem = os.path.join(a.results_dir, "egg_exploration" + (f"_{a.tag}" if a.tag else ""))
-  RP.save_results(res, "egg_exploration", argv, stem, render_md)
+  provenance.save_results(res, "egg_exploration", argv, stem, render_md)
   return 0
 
 

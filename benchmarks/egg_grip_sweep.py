@@ -38,7 +38,8 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import reward_preference as RP  # noqa: E402  (the sibling benchmark: its rollouts, returns and results writer)
+import provenance  # noqa: E402  (the sibling module: the results writer)
+import reward_preference as RP  # noqa: E402  (the sibling benchmark: its rollouts and returns)
 import tasks  # noqa: E402
 from tasks import pick_egg as P  # noqa: E402
 from tasks import robot as R  # noqa: E402
@@ -161,7 +162,7 @@ def main(argv=None) -> int:
     raise ValueError(f"task_settings: the sweep is of the carry (goal='carry'), got goal={settings.get('goal')!r}")
   res = run(a.episodes, insides, accels, a.seed, settings, a.damage_weight)
   stem = os.path.join(a.results_dir, "egg_grip_sweep" + (f"_{a.tag}" if a.tag else ""))
-  RP.save_results(res, "egg_grip_sweep", argv, stem, render_md)
+  provenance.save_results(res, "egg_grip_sweep", argv, stem, render_md)
   return 0
 
 

@@ -24,9 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shlex
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -36,9 +34,8 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import reward_preference as RP  # noqa: E402  (the sibling benchmark: its git helper)
+import provenance  # noqa: E402  (the sibling module: the results writer)
 import tasks  # noqa: E402
-from mjx_damage.io import write_json, write_text  # noqa: E402
 from tasks import pick_egg as P  # noqa: E402
 from train.policy import load_policy  # noqa: E402
 
@@ -123,14 +120,8 @@ def main(argv=None) -> int:
     with open(metrics) as f:
       last = [json.loads(line) for line in f if line.strip()][-1]
     cfg["env_steps_trained"] = last.get("env_steps")
-  res.update(run_config=cfg,
-             command="PYTHONPATH=. .venv/bin/python benchmarks/pick_egg_push.py " + " ".join(
-                 shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])),
-             jax=jax.__version__, backend=jax.default_backend(),
-             date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), git=RP._git())
-  write_json(a.out + ".json", res)
-  write_text(a.out + ".md", render_md(res))
-  print(f"wrote {a.out}.json / .md")
+  res["run_config"] = cfg
+  provenance.save_results(res, "pick_egg_push", argv, a.out, render_md)
   return 0
 
 

@@ -45,7 +45,6 @@ import argparse
 import json
 import os
 import platform
-import shlex
 import sys
 import time
 
@@ -57,6 +56,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
+import provenance  # noqa: E402  (the sibling module: command, git, date)
 import tasks  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 
@@ -279,30 +279,6 @@ def render_md(result: dict) -> str:
   return "\n".join(lines)
 
 
-def _git() -> str:
-  import subprocess
-
-  try:
-    rev = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                         timeout=10).stdout.strip()
-    dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True, timeout=10).stdout.strip()
-    return rev + ("+dirty" if dirty else "") if rev else "unknown"
-  except (OSError, subprocess.SubprocessError):
-    return "unknown"
-
-
-def save_results(res: dict, script: str, argv, stem: str, render) -> None:
-  """Stamp ``res`` with what made it (the command ``benchmarks/<script>.py ARGV``, jax, backend, date, git)
-  and write ``stem``.json and ``stem``.md (``render(res)``). For this benchmark's siblings."""
-  res.update(command=f"PYTHONPATH=. .venv/bin/python benchmarks/{script}.py " + " ".join(
-      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])), jax=jax.__version__,
-      backend=jax.default_backend(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), git=_git())
-  write_json(stem + ".json", res)
-  write_text(stem + ".md", render(res))
-  print(f"wrote {stem}.json / .md")
-
-
 def parse_args(argv=None):
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--tasks", default=",".join(RL_TASKS))
@@ -357,11 +333,10 @@ def parse_args(argv=None):
 
 def main(argv=None) -> int:
   a = parse_args(argv)
-  command = "PYTHONPATH=. .venv/bin/python benchmarks/reward_preference.py " + " ".join(
-      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+  command = provenance.command("reward_preference", argv)
   result = {"command": command.strip(), "gammas": a.gamma_list, "damage_weight": a.damage_weight, "jax": jax.__version__,
             "backend": jax.default_backend(), "machine": platform.machine(), "cpu_count": os.cpu_count(),
-            "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "git": _git(), "tasks": []}
+            "date": provenance.now(), "git": provenance.git(), "tasks": []}
   robot = "" if a.robot == "gripper" else f"_{a.robot}"  # gripper: the committed results' names and fields
   if robot:
     result["robot"] = a.robot

@@ -15,6 +15,7 @@ tests of their argument checks and helpers.
 import functools
 import importlib.util
 import os
+import sys
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 # The suite's checks were written for the floating gripper (half the Panda's compile time, 2.8x its step
@@ -33,7 +34,11 @@ BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file
 
 
 def load_benchmark(name: str):
-  """``benchmarks/<name>.py`` imported as module ``name``."""
+  """``benchmarks/<name>.py`` imported as module ``name``; its sibling imports (``provenance``,
+  ``reward_preference``) resolve as when it runs as a script (the folder joins ``sys.path``, last, so it
+  shadows nothing)."""
+  if BENCHMARKS not in sys.path:
+    sys.path.append(BENCHMARKS)
   spec = importlib.util.spec_from_file_location(name, os.path.join(BENCHMARKS, name + ".py"))
   module = importlib.util.module_from_spec(spec)
   spec.loader.exec_module(module)

@@ -6,17 +6,12 @@ import numpy as np
 import pytest
 
 import tasks
-from conftest import BENCHMARKS, load_benchmark
+from conftest import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def sweep():
-  import sys
-  sys.path.insert(0, BENCHMARKS)  # its sibling import (reward_preference), as when run as a script
-  try:
-    yield load_benchmark("egg_grip_sweep")
-  finally:
-    sys.path.remove(BENCHMARKS)
+  return load_benchmark("egg_grip_sweep")
 
 
 @pytest.mark.parametrize("bad", [-0.001, float("nan"), 0.03, True, "5mm"])
@@ -71,12 +66,7 @@ def test_tiny_sweep_the_gentle_grip_carries_safely_and_a_deep_one_crushes(sweep,
 
 @pytest.fixture(scope="module")
 def exploration():
-  import sys
-  sys.path.insert(0, BENCHMARKS)
-  try:
-    yield load_benchmark("egg_exploration")
-  finally:
-    sys.path.remove(BENCHMARKS)
+  return load_benchmark("egg_exploration")
 
 
 @pytest.mark.parametrize("argv, field", [
