@@ -101,6 +101,47 @@ def test_one_seed_actor_starts_every_seed(demos, env, tmp_path):
     np.testing.assert_array_equal(np.asarray(a)[1], np.asarray(b)[0])
 
 
+def test_init_seed_starts_every_seed_from_one_seed_of_the_checkpoint(fitted, env):
+  fit, out = fitted
+  res = train.train(env, seeds=(0, 1, 2), init_from=out, init_seed=1, critic_warmup_iterations=100,
+                    num_timesteps=ITER, progress=False, **TINY)
+  for a, b in zip(jax.tree.leaves(res.train_state.params.policy), jax.tree.leaves(fit.policy), strict=True):
+    for s in range(3):
+      np.testing.assert_array_equal(np.asarray(a)[s], np.asarray(b)[1])
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(init_seed=7), "^init_seed: 7 is not a seed of .*its seeds: 0, 1"),
+    (dict(init_seed=0, init_from=None), "^init_seed: .* give init_from"),
+])
+def test_bad_init_seed_is_refused(fitted, env, kw, match):
+  _, out = fitted
+  kw = dict({"init_from": out}, **kw)
+  with pytest.raises(ValueError, match=match):
+    train.train(env, seeds=(0,), num_timesteps=ITER, progress=False, **kw, **TINY)
+
+
+def test_exported_policy_is_the_run_without_its_env_states(env, tmp_path):
+  """export_policy keeps what load_policy and init_from read (same weights, same seeds) and drops the train
+  state (env states, optimizer), so a GPU run's policy fits through a device call's file limit."""
+  run = str(tmp_path / "run")
+  train.train(env, seeds=(3, 4), num_timesteps=ITER, progress=False, out_dir=run, plot=False, **TINY)
+  small = str(tmp_path / "policy.npz")
+  ckpt.export_policy(os.path.join(run, ckpt.FILENAME), small)
+  full = np.load(os.path.join(run, ckpt.FILENAME))
+  part = np.load(small)
+  assert any(k.startswith("s") for k in full.files) and not any(k.startswith("s") for k in part.files)
+  assert ckpt.read_meta(small) == ckpt.read_meta(os.path.join(run, ckpt.FILENAME))
+  for seed in (3, 4):
+    a, b = train.load_policy(run, env, seed=seed), train.load_policy(small, env, seed=seed)
+    for x, y in zip(jax.tree.leaves(a.params), jax.tree.leaves(b.params), strict=True):
+      np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+  with pytest.raises(ValueError, match="^checkpoint: .* truncated or corrupt"):
+    (tmp_path / "bad.npz").write_bytes(b"garbage")
+    ckpt.export_policy(str(tmp_path / "bad.npz"), str(tmp_path / "out.npz"))
+  assert not os.path.exists(tmp_path / "out.npz")
+
+
 @pytest.mark.parametrize("change, match", [
     (dict(policy_hidden_sizes=(8, 8)), "policy_hidden_sizes"),
     (dict(seeds=(0, 1, 2)), "holds 2 seeds"),

@@ -161,7 +161,8 @@ def check_memory(trainer: Trainer, cfg: PPOConfig, available=None, num_devices: 
 ACTOR_FIELDS = ("policy_hidden_sizes", "activation", "normalize_observations")  # what fixes the actor's shape
 
 
-def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str) -> str:
+def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str,
+                    init_seed: Optional[int] = None) -> str:
   """The checkpoint file behind ``init_from``, checked against this run (``ValueError("init_from: …")``)."""
   path = os.fspath(path)
   file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
@@ -182,20 +183,29 @@ def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str)
     if getattr(src, f) != getattr(cfg, f):
       raise ValueError(f"init_from: {file} has {f} = {getattr(src, f)!r}, this run {getattr(cfg, f)!r} "
                        f"(give --{f.replace('_', '-')} or a matching preset)")
-  if src.num_seeds not in (1, cfg.num_seeds):
+  if init_seed is not None:
+    if init_seed not in src.seeds:
+      raise ValueError(f"init_seed: {init_seed!r} is not a seed of {file} (its seeds: "
+                       f"{', '.join(map(str, src.seeds))})")
+  elif src.num_seeds not in (1, cfg.num_seeds):
     raise ValueError(f"init_from: {file} holds {src.num_seeds} seeds; this run has {cfg.num_seeds} "
-                     "(give a checkpoint of 1 seed, or of as many seeds as the run)")
+                     "(give a checkpoint of 1 seed, or of as many seeds as the run, or init_seed: one of its seeds)")
   return file
 
 
-def actor_from_checkpoint(file: str, trainer: Trainer, ts: TrainState) -> TrainState:
-  """``ts`` (leading seed axis S) with the actor and normaliser of checkpoint ``file``, a fresh optimizer."""
+def actor_from_checkpoint(file: str, trainer: Trainer, ts: TrainState, init_seed: Optional[int] = None) -> TrainState:
+  """``ts`` (leading seed axis S) with the actor and normaliser of checkpoint ``file``, a fresh optimizer.
+
+  ``init_seed``: the checkpoint's seed whose actor starts every seed (default: seed by seed, or its one seed)."""
   S = int(ts.iteration.shape[0])
-  src_seeds = len(PPOConfig.from_json(ckpt.read_meta(file)["config"]).seeds)
+  src_seeds = PPOConfig.from_json(ckpt.read_meta(file)["config"]).seeds
   one = jax.eval_shape(lambda: trainer.inference_params(jax.tree.map(lambda x: x[0], ts)))
-  template = jax.tree.map(lambda t: jax.ShapeDtypeStruct((src_seeds,) + tuple(t.shape), t.dtype), one)
+  template = jax.tree.map(lambda t: jax.ShapeDtypeStruct((len(src_seeds),) + tuple(t.shape), t.dtype), one)
   normalizer, policy = ckpt.restore(file, template, "policy")
-  if src_seeds != S:  # one pre-trained actor for every seed
+  if init_seed is not None:
+    i = list(src_seeds).index(init_seed)
+    normalizer, policy = jax.tree.map(lambda x: x[i:i + 1], (normalizer, policy))
+  if jax.tree.leaves(policy)[0].shape[0] != S:  # one pre-trained actor for every seed
     normalizer, policy = jax.tree.map(lambda x: jnp.broadcast_to(x, (S,) + x.shape[1:]), (normalizer, policy))
   params = ts.params.replace(policy=jax.tree.map(jnp.asarray, policy))
   return ts.replace(params=params, normalizer=jax.tree.map(jnp.asarray, normalizer),
@@ -204,7 +214,8 @@ def actor_from_checkpoint(file: str, trainer: Trainer, ts: TrainState) -> TrainS
 def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] = None,
           episode_length: Optional[int] = None, out_dir: Optional[str] = None, resume: bool = False,
           progress: bool = True, time_limit: Optional[float] = None, task_kwargs: Optional[dict] = None,
-          profile: bool = False, plot: bool = True, init_from: Optional[str] = None, devices=None,
+          profile: bool = False, plot: bool = True, init_from: Optional[str] = None,
+          init_seed: Optional[int] = None, devices=None,
           **config) -> TrainResult:
   """Train PPO / PPO-Lagrangian / PID-Lagrangian on ``task`` for one or several seeds in one program.
 
@@ -223,6 +234,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     profile: time rollout-only vs whole iterations at the end (one extra compile).
     init_from: a checkpoint (run directory or file: a PPO run, or a BC actor from :mod:`train.bc_actor`)
       whose actor and observation normaliser start every seed (one seed broadcast, or one per seed);
+      ``init_seed`` picks one seed of a multi-seed checkpoint to start every seed;
       the critic starts fresh — ``critic_warmup_iterations`` holds the actor while it learns.
     devices: "all", a count, or a device list (train.distributed.select_devices); None: the first device.
       Seeds and each seed's env batch are laid across them (train.mesh); evaluation shards its episodes over them.
@@ -253,7 +265,9 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   M.check_layout(cfg, len(devs))
   mesh = M.make_mesh(devs, cfg.num_seeds)
   trainer = Trainer(env, cfg, M.axis_name(mesh))
-  init_file = None if init_from is None else check_init_from(init_from, trainer, cfg, task_name)
+  if init_seed is not None and init_from is None:
+    raise ValueError("init_seed: picks the seed of an init_from checkpoint; give init_from")
+  init_file = None if init_from is None else check_init_from(init_from, trainer, cfg, task_name, init_seed)
   check_memory(trainer, cfg, num_devices=len(devs))
   S, spi = cfg.num_seeds, cfg.steps_per_iteration
   seed_arr = np.asarray(cfg.seeds, np.int32)
@@ -269,7 +283,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   meta = {"task": task_name, "task_kwargs": recorded_task_kwargs(task, env, task_kwargs), "preset": preset,
           "config": cfg.to_json(),
           "obs_size": trainer.obs_size, "action_size": trainer.action_size, "steps_per_iteration": spi,
-          "init_from": None if init_file is None else os.path.abspath(init_file),
+          "init_from": None if init_file is None else os.path.abspath(init_file), "init_seed": init_seed,
           "devices": len(devs), "mesh": dict(mesh.shape), "processes": jax.process_count()}
 
   timings = {k: 0.0 for k in ("compile", "eval_compile", "iterations", "eval", "checkpoint", "host")}
@@ -296,7 +310,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       print(f"resume: no checkpoint in {out_dir}; starting a fresh run", file=sys.stderr)
     ts = jax.jit(init_fn, out_shardings=layout)(seed_arr)
     if init_file is not None:
-      ts = M.put(jax.device_get(actor_from_checkpoint(init_file, trainer, jax.device_get(ts))), layout)
+      ts = M.put(jax.device_get(actor_from_checkpoint(init_file, trainer, jax.device_get(ts), init_seed)), layout)
     start_iteration = 0
   if writes is not None:
     io.write_json(os.path.join(out_dir, "config.json"), meta)
