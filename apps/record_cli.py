@@ -48,7 +48,7 @@ def build_parser() -> Parser:
   p = Parser(prog="mjx-damage record", description=__doc__.split("\n\n")[0])
   p.add_argument("--task", required=True, help="registered task name")
   p.add_argument("--policy", required=True,
-                 help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint[+sample|+mean]:RUN")
+                 help="operator:careful|careless|mixed, scripted:safe|unsafe, random, zero, checkpoint[+sample|+mean]:RUN[#SEED]")
   R.add_task_override_arguments(p)
   p.add_argument("--episodes", type=int, required=True, help="episodes to record")
   p.add_argument("--out", default=None, help="output .hdf5 (default: runs/record-<task>-<time>/demos.hdf5)")

@@ -4,8 +4,8 @@ Tasks: the registry's (:func:`tasks.names`) and two built-in scenes, ``drop``
 (:class:`tasks.drop.DropEnv`, no actions) and ``push_boxes`` (4 boxes of
 :mod:`tasks.bench_table`, a 2-D pusher). Policies: ``scripted:safe``,
 ``scripted:unsafe`` (the task's scripted policy), ``random``, ``zero``,
-``checkpoint[+sample|+mean]:PATH`` (a trained run, :func:`train.load_policy`: its
-mode, a sample, or its mean). Every check raises ``ValueError("task: …")``/``("policy: …")``
+``checkpoint[+sample|+mean]:PATH[#SEED]`` (a trained run, :func:`train.load_policy`: its
+mode, a sample, or its mean; ``#SEED`` picks a seed of a multi-seed run, default its first). Every check raises ``ValueError("task: …")``/``("policy: …")``
 before anything is built.
 This is the one module that knows all the names, so it sits at the top.
 """
@@ -30,7 +30,7 @@ from train import checkpoint as ckpt
 from train import evaluate as E
 
 BACKENDS = ("auto", "mjx", "native")  # every command; eval, sweep, render and bench also take "warp" (warp_overrides)
-POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint[+sample|+mean]:PATH")
+POLICY_SPECS = ("scripted:safe", "scripted:unsafe", "random", "zero", "checkpoint[+sample|+mean]:PATH[#SEED]")
 # A trained policy's action (train.networks.policy_apply): its mode (brax's deterministic policy), one sample per
 # step (the stochastic policy PPO trains), or the squashed mean.
 CHECKPOINT_ACTIONS = {"checkpoint": "mode", "checkpoint+sample": "sample", "checkpoint+mean": "mean"}
@@ -150,11 +150,33 @@ def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
   if kind == "scripted" and arg in ("safe", "unsafe"):
     return kind, arg
   if kind in CHECKPOINT_ACTIONS and arg:
-    kind = "checkpoint"
-    if not os.path.exists(arg):
-      raise ValueError(f"policy: checkpoint {arg!r} does not exist")
-    return kind, arg
+    path, seed = _split_seed(arg)
+    if not os.path.exists(path):
+      raise ValueError(f"policy: checkpoint {path!r} does not exist")
+    if seed is not None:
+      file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+      seeds = ckpt.read_meta(file).get("config", {}).get("seeds", [])
+      if seed not in seeds:
+        raise ValueError(f"policy: seed {seed} is not a seed of checkpoint {path!r} (its seeds: "
+                         f"{', '.join(map(str, seeds))})")
+    return "checkpoint", path
   raise ValueError(f"policy: unknown policy {spec!r}; expected one of {', '.join(POLICY_SPECS)}")
+
+
+def _split_seed(arg: str) -> tuple[str, Optional[int]]:
+  """``"run#2"`` → ("run", 2); ``"run"`` → ("run", None). A path that exists as given keeps its '#'."""
+  path, sep, tail = arg.rpartition("#")
+  if not sep or os.path.exists(arg):
+    return arg, None
+  try:
+    return path, int(tail)
+  except ValueError:
+    raise ValueError(f"policy: {arg!r}: after '#' comes a seed of the run (an integer), got {tail!r}") from None
+
+
+def checkpoint_seed(spec: str) -> Optional[int]:
+  """The seed a ``checkpoint…:PATH#SEED`` spec asks for (None: the run's first)."""
+  return _split_seed(spec.partition(":")[2])[1]
 
 
 def checkpoint_action(spec: str) -> str:
@@ -173,7 +195,7 @@ def make_policy(spec: str, env) -> E.Policy:
     return E.zero_policy(env.action_size)
   if kind == "scripted":
     return tasks.scripted_policy(env, arg)
-  return train.load_policy(arg, env, action=checkpoint_action(spec))
+  return train.load_policy(arg, env, action=checkpoint_action(spec), seed=checkpoint_seed(spec))
 
 
 # Source trees every program a command traces is built from (the program cache's key hashes them).
@@ -250,7 +272,7 @@ def policy_task_kwargs(policy_spec: str, task: str) -> dict:
 
 def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
   """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
-  path = policy_spec.partition(":")[2]
+  path = _split_seed(policy_spec.partition(":")[2])[0]
   file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
   try:
     meta = ckpt.read_meta(file)

@@ -45,7 +45,7 @@ def build_parser() -> Parser:
   ap.add_argument("--task", required=True, help=f"task name (registry tasks, or built-in: {', '.join(R.BUILTIN_TASKS)})")
   R.add_task_override_arguments(ap)
   ap.add_argument("--policy", default=None,
-                  help="scripted:safe | scripted:unsafe | random | zero | checkpoint[+sample|+mean]:RUN drives the robot "
+                  help="scripted:safe | scripted:unsafe | random | zero | checkpoint[+sample|+mean]:RUN[#SEED] drives the robot "
                        "(default: you, from the keyboard)")
   ap.add_argument("--record", default=None, metavar="FILE.hdf5",
                   help="append every finished episode to this dataset (created if missing; never overwritten)")

@@ -1,0 +1,121 @@
+"""Re-score trained policies on this machine: committed weights, evaluated again on one or both physics backends.
+
+A GPU training run scores its final policies itself (benchmarks/rl_multiseed.py, MJX on the GPU). This script
+takes the weights it exported (``--export-policy``: ``rl_<task>_<device>_<tag>_<method>_policy.npz``, committed
+beside the results) and evaluates chosen seeds again here, on MJX-JAX and on native MuJoCo (C, CPU threads):
+another machine, another episode sample and, with ``native``, another implementation of the physics, so a
+trained behaviour that only exists in one simulator build shows up as a disagreement. The task and its settings
+come from the checkpoint (``tasks.stored_kwargs``); the scripted safe/unsafe policies can be added as references.
+
+Policies are the CLI's specs (``mjx-damage eval --policy``): ``checkpoint[+sample|+mean]:FILE#SEED``,
+``scripted:safe``, ``scripted:unsafe``, ``zero``, ``random``.
+
+Writes ``benchmarks/results/policy_recheck_<task>[_<tag>].{json,md}`` with the command.
+
+Usage::
+
+    PYTHONPATH=. .venv/bin/python benchmarks/policy_recheck.py --task pick_egg --episodes 256 \\
+        --policies 'checkpoint:benchmarks/results/…_policy.npz#1,scripted:safe'
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import mjx_damage  # noqa: E402,F401  (XLA:CPU flags and the jax compat shim before jax starts)
+
+import provenance  # noqa: E402  (the sibling module: the results writer)
+from apps import resolve as R  # noqa: E402
+from train import evaluate as E  # noqa: E402
+
+BACKENDS = ("mjx", "native")
+
+
+def parse(argv=None):
+  p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+  p.add_argument("--task", required=True, help="registry task the policies were trained on")
+  p.add_argument("--policies", required=True,
+                 help="comma-separated policy specs (checkpoint[+sample|+mean]:FILE#SEED, scripted:safe, …)")
+  p.add_argument("--backends", default="mjx,native", help=f"comma-separated of {','.join(BACKENDS)}")
+  p.add_argument("--episodes", type=int, default=256)
+  p.add_argument("--seed", type=int, default=0, help="episode sample (initial states, sampled actions)")
+  p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
+                 help="task keyword for policies without a checkpoint (a checkpoint brings its own)")
+  p.add_argument("--tag", default="")
+  p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  args = p.parse_args(argv)
+  args.policies = [s for s in args.policies.split(",") if s]
+  args.backends = [b for b in args.backends.split(",") if b]
+  try:  # everything checked before a task is built or compiled
+    R.check_task(args.task)
+    if not args.policies:
+      raise ValueError("policies: give at least one policy spec")
+    for b in args.backends:
+      if b not in BACKENDS:
+        raise ValueError(f"backends: unknown backend {b!r}; backends: {', '.join(BACKENDS)}")
+    if not args.backends or len(set(args.backends)) != len(args.backends):
+      raise ValueError(f"backends: give each of {', '.join(BACKENDS)} at most once, at least one")
+    E.check_args(args.episodes, 1.0, 95.0, seed=args.seed)
+    args.overrides = [R.task_overrides(args.task, R.policy_task_kwargs(s, args.task), None, args.task_arg)
+                      for s in args.policies]  # also reads every checkpoint (its task, its seed)
+    built = {}  # one env per distinct setting; making it checks the settings' values (nothing compiles)
+    args.envs = [built.setdefault(json.dumps(o, sort_keys=True), R.make_task(args.task, **o))
+                 for o in args.overrides]
+  except ValueError as e:
+    p.error(str(e))
+  return args
+
+
+def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: int, seed: int) -> dict:
+  """``spec`` on ``env`` (``task`` made with ``overrides``) over ``episodes`` episodes of ``backend``:
+  E.evaluate's metrics."""
+  policy = R.make_policy(spec, env)
+  env = R.on_backend(env, backend, episodes)
+  t0 = time.perf_counter()
+  res = E.evaluate(env, policy, episodes, seed, episode_length=R.episode_length_of(env, task))
+  return {"policy": spec, "backend": backend, "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
+          **{k: res["metrics"][k] for k in ("completion", "safe_completion", "cost_mean", "avg_health",
+                                            "min_env_health", "task_return")}}
+
+
+def render_md(res: dict) -> str:
+  lines = [f"# Trained policies re-scored: {res['task']}", "",
+           f"Date: {res['date']}. Git: {res['git']}. jax {res['jax']} ({res['backend']}). "
+           f"{res['episodes']} episodes per row (episode seed {res['seed']}); safe completion = completed and every "
+           "entity's final health > 95. Policies as `mjx-damage eval --policy` names them (`#SEED`: the seed of a "
+           "multi-seed run); the task settings come from each checkpoint.", "",
+           f"Command: `{res['command']}`", "",
+           "| policy | backend | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
+           "|---|---|---|---|---|---|---|---|---|"]
+  for r in res["rows"]:
+    kind, sep, path = r["policy"].partition(":")
+    lines.append(f"| `{kind}{sep}{os.path.basename(path)}` | {r['backend']} | {100 * r['completion']:.1f} | "
+                 f"{100 * r['safe_completion']:.1f} | {r['cost_mean']:.2f} | {r['avg_health']:.2f} | "
+                 f"{r['min_env_health']:.2f} | {r['task_return']:.1f} | {r['wall_s']:.0f} |")
+  return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+  args = parse(argv)
+  rows = []
+  for spec, overrides, env in zip(args.policies, args.overrides, args.envs):
+    for backend in args.backends:
+      rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed))
+      r = rows[-1]
+      print(f"{spec} [{backend}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
+            f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
+  res = {"task": args.task, "episodes": args.episodes, "seed": args.seed, "rows": rows}
+  stem = os.path.join(args.results_dir, f"policy_recheck_{args.task}" + (f"_{args.tag}" if args.tag else ""))
+  provenance.save_results(res, "policy_recheck", argv, stem, render_md)
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

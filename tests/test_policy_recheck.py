@@ -1,0 +1,83 @@
+"""Committed trained weights, scored again on this machine: the ``checkpoint:PATH#SEED`` policy spec every
+command takes, and benchmarks/policy_recheck.py (bad values refused before anything is built; a tiny native
+run of a committed Pick Egg policy)."""
+
+import json
+import os
+
+import jax
+import numpy as np
+import pytest
+from conftest import load_benchmark
+
+import tasks
+import train
+from apps import resolve as R
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# Pick Egg from the pre-grasp start, trained on a GPU (seeds 0,1,2: w = 2 from a carrying actor; the committed
+# results say seed 0 keeps still, seeds 1 and 2 carry the egg safely)
+SAFE = os.path.join(ROOT, "benchmarks", "results", "rl_pick_egg_nvidia_h200_held_from_carry_ramp10_penalty_policy.npz")
+
+recheck = load_benchmark("policy_recheck")
+
+
+def test_seed_suffix_names_a_seed_of_the_run():
+  assert R.parse_policy_spec(f"checkpoint:{SAFE}#2") == ("checkpoint", SAFE)
+  assert R.checkpoint_seed(f"checkpoint+sample:{SAFE}#2") == 2
+  assert R.checkpoint_seed(f"checkpoint:{SAFE}") is None
+
+
+@pytest.mark.parametrize("suffix, says", [("#9", "seed 9 is not a seed of checkpoint .*its seeds: 0, 1, 2"),
+                                          ("#one", "after '#' comes a seed of the run")])
+def test_bad_seed_suffix_is_refused(suffix, says):
+  with pytest.raises(ValueError, match="^policy: .*" + says):
+    R.parse_policy_spec(f"checkpoint:{SAFE}{suffix}")
+
+
+def test_a_path_with_a_hash_that_exists_is_a_path(tmp_path):
+  odd = tmp_path / "run#1.npz"
+  odd.write_bytes(open(SAFE, "rb").read())
+  assert R.parse_policy_spec(f"checkpoint:{odd}") == ("checkpoint", str(odd))
+  assert R.checkpoint_seed(f"checkpoint:{odd}") is None
+
+
+def test_seed_suffix_loads_that_seeds_weights():
+  overrides = R.task_overrides("pick_egg", R.policy_task_kwargs(f"checkpoint:{SAFE}#1", "pick_egg"), None, [])
+  assert overrides["start"] == "pregrasp" and overrides["carry_reward"] == "held"
+  env = tasks.make("pick_egg", **overrides)
+  got = R.make_policy(f"checkpoint:{SAFE}#1", env)
+  for seed, same in ((1, True), (0, False)):
+    want = train.load_policy(SAFE, env, seed=seed)
+    eq = all(np.array_equal(np.asarray(a), np.asarray(b))
+             for a, b in zip(jax.tree.leaves(got.params), jax.tree.leaves(want.params), strict=True))
+    assert eq == same
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--task", "pick_eggs", "--policies", "zero"], "task: unknown task"),
+    (["--task", "pick_egg", "--policies", ","], "policies: give at least one"),
+    (["--task", "pick_egg", "--policies", "zero", "--backends", "warp"], "backends: unknown backend 'warp'"),
+    (["--task", "pick_egg", "--policies", "zero", "--backends", "mjx,mjx"], "backends: give each"),
+    (["--task", "pick_egg", "--policies", "zero", "--episodes", "0"], "episodes"),
+    (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#7"], "policy: seed 7"),
+    (["--task", "place_plate", "--policies", f"checkpoint:{SAFE}#1"], "trained on task 'pick_egg'"),
+    (["--task", "pick_egg", "--policies", "zero", "--task-arg", "start=\"flying\""], "start"),
+])
+def test_bad_values_are_refused_before_anything_is_built(argv, says, tmp_path, capsys):
+  with pytest.raises(SystemExit):
+    recheck.main(argv + ["--results-dir", str(tmp_path)])
+  assert says in capsys.readouterr().err
+  assert not os.listdir(tmp_path)
+
+
+def test_a_committed_safe_carry_scores_safe_on_native_mujoco(tmp_path):
+  assert recheck.main(["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1", "--backends", "native",
+                       "--episodes", "8", "--tag", "t", "--results-dir", str(tmp_path)]) == 0
+  with open(tmp_path / "policy_recheck_pick_egg_t.json") as f:
+    res = json.load(f)
+  (row,) = res["rows"]
+  assert row["backend"] == "native" and row["task_kwargs"]["start"] == "pregrasp"
+  assert row["completion"] >= 0.75 and row["safe_completion"] >= 0.75
+  md = open(tmp_path / "policy_recheck_pick_egg_t.md").read()
+  assert "benchmarks/policy_recheck.py" in md and "| `checkpoint:" in md and "#1` | native |" in md
