@@ -107,10 +107,20 @@ def method_spec(name: str, args) -> dict:
                                                else "K=" + "/".join(f"{g:g}" for g in args.pid_gains))
       spec = dict(spec, label=spec["label"].replace(")", f"; {tune})", 1), **gains)
   if name == "penalty" and (args.damage_warmup_steps or args.damage_ramp_steps):
-    sched = f"w=0 for {args.damage_warmup_steps:.3g} steps" + (
-        f", then linear to {w:g} over {args.damage_ramp_steps:.3g}" if args.damage_ramp_steps else f", then {w:g}")
+    if args.damage_warmup_steps:
+      sched = f"w=0 for {args.damage_warmup_steps:.3g} steps" + (
+          f", then linear to {w:g} over {args.damage_ramp_steps:.3g}" if args.damage_ramp_steps else f", then {w:g}")
+    else:
+      sched = f"linear from 0 over {args.damage_ramp_steps:.3g} steps"
     spec = dict(spec, label=spec["label"].replace(")", f"; {sched})", 1),
                 damage_warmup_steps=int(args.damage_warmup_steps), damage_ramp_steps=int(args.damage_ramp_steps))
+  if args.init_from:
+    src = os.path.basename(args.init_from) + ("" if args.init_seed is None else f" seed {args.init_seed}")
+    spec = dict(spec, label=spec["label"] + f", actor from {src}"
+                + (f" (critic alone for {args.critic_warmup_iterations} iterations)"
+                   if args.critic_warmup_iterations else ""),
+                init_from=args.init_from, init_seed=args.init_seed,
+                critic_warmup_iterations=args.critic_warmup_iterations)
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
@@ -176,6 +186,18 @@ def parse(argv):
                       "mean: brax's deterministic policy), sample (the stochastic policy PPO trains) and mean "
                       "(E[tanh(u)] from 32 draws; train.networks.policy_apply); the first is the row's headline, "
                       "the others are kept per seed beside it")
+  p.add_argument("--init-from", default=None, metavar="CHECKPOINT",
+                 help="start every method's actor and observation normaliser from this checkpoint (a run "
+                      "directory, a checkpoint.npz or a --export-policy file: one seed for all, or one per "
+                      "seed); critic and optimizer start fresh")
+  p.add_argument("--init-seed", type=int, default=None,
+                 help="with --init-from: the checkpoint's seed whose actor starts every seed")
+  p.add_argument("--critic-warmup-iterations", type=int, default=0,
+                 help="with --init-from: iterations in which only the critic learns (the actor is held)")
+  p.add_argument("--export-policy", action="store_true",
+                 help="also write each method's final policy alone (train.checkpoint.export_policy: weights and "
+                      "normaliser, no env states; ~0.1 MB) as rl_<task>_<device>_<tag>_<method>_policy.npz "
+                      "beside the results, for --init-from on another machine")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   p.add_argument("--work-dir", default=None,
                  help="folder of the run directories, one per method (default: a new temporary folder per call, "
@@ -249,6 +271,28 @@ def parse(argv):
       p.error(f"{flag}: schedules the penalty method's weight; --methods has no penalty")
     if v and not args.damage_weight > 0:
       p.error(f"{flag}: schedules the damage weight; --damage-weight must be > 0")
+  if args.critic_warmup_iterations < 0:
+    p.error(f"--critic-warmup-iterations: must be >= 0, got {args.critic_warmup_iterations}")
+  if args.init_seed is not None and not args.init_from:
+    p.error("--init-seed: picks a seed of the --init-from checkpoint; give --init-from")
+  if args.critic_warmup_iterations and not args.init_from:
+    p.error("--critic-warmup-iterations: holds a pre-trained actor while the critic learns; give --init-from")
+  if args.init_from:
+    from train import checkpoint as ckpt
+    file = os.path.join(args.init_from, ckpt.FILENAME) if os.path.isdir(args.init_from) else args.init_from
+    try:
+      meta = ckpt.read_meta(file)
+    except ValueError as e:
+      p.error(f"--init-from: {e}")
+    src_task, src_seeds = meta.get("task"), len(meta.get("config", {}).get("seeds", ()))
+    if src_task not in (None, args.task):
+      p.error(f"--init-from: {file} was trained on {src_task!r}, not --task {args.task!r}")
+    if args.init_seed is not None and args.init_seed not in meta.get("config", {}).get("seeds", ()):
+      p.error(f"--init-seed: {args.init_seed} is not a seed of {file} (its seeds: "
+              f"{','.join(map(str, meta['config']['seeds']))})")
+    if args.init_seed is None and src_seeds not in (1, len(args.seeds)):
+      p.error(f"--init-from: {file} holds {src_seeds} seeds; give one seed or as many as --seeds "
+              f"({len(args.seeds)})")
   if args.resume and not args.work_dir:
     p.error("--resume: give --work-dir, the folder of the runs to continue")
   if args.work_dir and not args.resume:
@@ -532,6 +576,11 @@ def main(argv=None) -> int:
     if os.path.exists(src):
       with open(src, "rb") as f:
         io.write_bytes(os.path.join(os.path.dirname(base), row["curves"]), f.read())
+    if args.export_policy:
+      from train import checkpoint as ckpt
+      row["policy_file"] = os.path.basename(base) + f"_{name}_policy.npz"
+      ckpt.export_policy(os.path.join(work, name, ckpt.FILENAME), os.path.join(os.path.dirname(base),
+                                                                                 row["policy_file"]))
     payload["rows"].append(row)
     write_results(base, payload)  # after every method: a timeout keeps the finished ones
     print(json.dumps({k: row[k] for k in ("label", "summary", "throughput_all_seeds", "env_steps_per_seed")},

@@ -154,3 +154,47 @@ def test_damage_schedule_reaches_the_penalty_method():
   assert (pen["damage_warmup_steps"], pen["damage_ramp_steps"]) == (5_500_000, 1_000_000)
   assert "w=0 for 5.5e+06 steps, then linear to 2 over 1e+06" in pen["label"]
   assert "damage_warmup_steps" not in rl_multiseed.method_spec("task_only", a)
+
+
+EGG_POLICY = os.path.join(ROOT, "benchmarks", "results",
+                          "rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz")  # seeds 3,4,5
+
+
+def test_a_ramp_without_warmup_is_labelled_as_one():
+  pen = rl_multiseed.method_spec("penalty", rl_multiseed.parse(["--methods", "penalty", "--damage-ramp-steps", "1e7"]))
+  assert pen["damage_warmup_steps"] == 0 and "linear from 0 over 1e+07 steps" in pen["label"]
+
+
+@pytest.mark.parametrize("argv, field, says", [
+    (["--critic-warmup-iterations", "-1"], "--critic-warmup-iterations", ">= 0"),
+    (["--critic-warmup-iterations", "5"], "--critic-warmup-iterations", "give --init-from"),
+    (["--init-seed", "4"], "--init-seed", "give --init-from"),
+    (["--init-from", "no/such/run"], "--init-from", "no checkpoint file"),
+    (["--init-from", EGG_POLICY], "--init-from", "trained on 'pick_egg'"),  # --task defaults to place_plate
+    (["--task", "pick_egg", "--init-from", EGG_POLICY, "--init-seed", "9"], "--init-seed", "its seeds: 3,4,5"),
+    (["--task", "pick_egg", "--init-from", EGG_POLICY, "--seeds", "0,1"], "--init-from", "holds 3 seeds"),
+])
+def test_bad_init_from_names_the_flag_before_anything_runs(argv, field, says, capsys):
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(argv)
+  err = capsys.readouterr().err
+  assert field in err and says in err
+
+
+def test_a_corrupt_init_from_is_refused(tmp_path, capsys):
+  bad = tmp_path / "policy.npz"
+  bad.write_bytes(b"not a checkpoint")
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(["--init-from", str(bad)])
+  assert "--init-from: checkpoint:" in capsys.readouterr().err
+
+
+def test_init_from_reaches_every_method_with_its_seed_and_warmup():
+  a = rl_multiseed.parse(["--task", "pick_egg", "--methods", "task_only,penalty", "--seeds", "0,1",
+                          "--init-from", EGG_POLICY, "--init-seed", "4", "--critic-warmup-iterations", "10"])
+  for name in ("task_only", "penalty"):
+    spec = rl_multiseed.method_spec(name, a)
+    assert (spec["init_from"], spec["init_seed"], spec["critic_warmup_iterations"]) == (EGG_POLICY, 4, 10)
+    assert "actor from rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz seed 4" \
+        " (critic alone for 10 iterations)" in spec["label"]
+  assert "init_from" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse(["--methods", "penalty"]))
