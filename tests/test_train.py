@@ -415,3 +415,16 @@ def test_non_finite_losses_per_seed():
 def test_a_healthy_run_logs_no_non_finite_env_steps(smoke):
   rows = _rows(smoke.out_dir)
   assert rows and all(r["env_non_finite"] == 0.0 for r in rows)
+
+
+def test_cli_init_seed_is_checked_before_anything_runs(tmp_path, capsys):
+  from train import cli
+  egg = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks", "results",
+                     "rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz")  # seeds 3,4,5
+  out = str(tmp_path / "run")
+  assert cli.main(["--task", "pick_egg", "--out", out, "--init-seed", "4", "--no-progress"]) == 2
+  assert "--init-seed: picks a seed of the --init-from checkpoint" in capsys.readouterr().err
+  assert cli.main(["--task", "pick_egg", "--out", out, "--init-from", egg, "--init-seed", "9", "--no-progress"]) == 2
+  err = capsys.readouterr().err
+  assert "--init-seed: 9 is not a seed of" in err and "(its seeds: 3, 4, 5)" in err
+  assert not os.path.exists(out)

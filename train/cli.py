@@ -163,6 +163,9 @@ def build_parser() -> Parser:
   p.add_argument("--init-from", dest="init_from", default=None, metavar="RUN",
                  help="start every seed's actor and normaliser from this checkpoint (mjx-damage bc, or a train "
                       "run); the critic starts fresh (default: none)")
+  p.add_argument("--init-seed", dest="init_seed", type=_int, default=None, metavar="SEED",
+                 help="with --init-from: the checkpoint's seed whose actor starts every seed (default: seed by "
+                      "seed, or its one seed)")
   distributed.add_arguments(p)
   for flag, dest, typ, help_ in CONFIG_FLAGS:
     # default None = the preset's value, spelled out per preset (the formatter would only say None)
@@ -261,6 +264,14 @@ def main(argv=None) -> int:
     args["task_kwargs"] = task_kwargs or None
     if args["init_from"] is not None and not os.path.exists(args["init_from"]):
       raise ValueError(f"--init-from: no checkpoint at {args['init_from']}")
+    if args["init_seed"] is not None:
+      if args["init_from"] is None:
+        raise ValueError("--init-seed: picks a seed of the --init-from checkpoint; give --init-from")
+      src = args["init_from"]
+      seeds = ckpt.read_meta(os.path.join(src, ckpt.FILENAME) if os.path.isdir(src) else src)["config"]["seeds"]
+      if args["init_seed"] not in seeds:
+        raise ValueError(f"--init-seed: {args['init_seed']} is not a seed of {src} (its seeds: "
+                         f"{', '.join(map(str, seeds))})")
     if args["time_limit"] is not None and not (math.isfinite(args["time_limit"]) and args["time_limit"] > 0):
       raise ValueError(f"--time-limit: must be a number of seconds > 0, got {args['time_limit']}")
     if args["episode_length"] is not None and args["episode_length"] < 1:
