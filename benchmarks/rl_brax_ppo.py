@@ -27,6 +27,15 @@ env-steps, ≈ 50 k env-steps/s alone on the GPU, plus ≈ 65 s compile)::
     python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0 --seeds 0 --num-timesteps 20000000 \
         --num-evals 9 --budget-seconds 420 --out-dir $OUT
 
+From an actor of our trainer (``--init-from``, e.g. an ``rl_multiseed.py --export-policy`` file, and
+``--init-seed``): brax starts from its weights and observation normaliser, with its own fresh value function
+and the fixed w of the row (brax has no critic warm-up or w ramp), e.g. the crushing carry of Pick Egg::
+
+    python benchmarks/rl_brax_ppo.py --task pick_egg --task-settings '{"start": "pregrasp", "carry_reward": "held"}' \
+        --damage-weights 2 --seeds 0 --num-timesteps 60000000 --num-evals 16 --budget-seconds 450 \
+        --init-from benchmarks/results/rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz \
+        --init-seed 4 --eval-actions mode,sample --out-dir $OUT
+
 CPU plumbing check (learns nothing)::
 
     PYTHONPATH=. .venv/bin/python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0,2 --seeds 0 \
@@ -58,7 +67,9 @@ from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
 import tasks  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
+from train import checkpoint as ckpt  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
+from train.policy import load_policy  # noqa: E402
 from train.evaluate import evaluate, parametrized_policy  # noqa: E402
 from train.networks import POLICY_ACTIONS, init_policy, policy_apply  # noqa: E402
 
@@ -109,12 +120,14 @@ def network_factory(init_log_std: tuple[float, float] | None):
 
 
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
-              settings: dict | None = None, actions=("mode",)) -> dict:
+              settings: dict | None = None, actions=("mode",), init: tuple[str, int] | None = None) -> dict:
   """One brax PPO run, then the 1024-episode evaluation of its final policy; a result row.
 
   ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
   ``actions``: how the final policy acts (train.networks.policy_apply: mode = brax's deterministic
   policy, sample, mean); the first gives the row's columns, every one is kept in ``by_action``.
+  ``init``: (checkpoint file, seed): brax starts from that actor and observation normaliser of our trainer
+  (the same brax networks, :func:`check_init`), with its own fresh value function (``restore_value_fn=False``).
   """
   settings = dict(RL_SETTINGS.get(task, {}) if settings is None else settings)
   env = tasks.make(task, damage_weight=weight, **settings)
@@ -134,6 +147,10 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
     if budget_s is not None and step > 0 and time.time() - t_start > budget_s:
       raise _Budget
 
+  restore = {}
+  if init is not None:
+    actor = load_policy(init[0], env, seed=init[1])  # (normaliser, policy params) of that seed
+    restore = dict(restore_params=(actor.params[0], actor.params[1], None), restore_value_fn=False)
   stopped_early = False
   try:
     brax_ppo.train(
@@ -145,7 +162,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         normalize_observations=cfg["normalize_observations"], reward_scaling=cfg["reward_scaling"],
         network_factory=network_factory(cfg.get("init_log_std")),
         num_evals=cfg["num_evals"], num_eval_envs=cfg["num_eval_envs"], seed=seed,
-        progress_fn=progress, policy_params_fn=keep_params)
+        progress_fn=progress, policy_params_fn=keep_params, **restore)
   except _Budget:
     stopped_early = True
   train_s = time.time() - t_start
@@ -165,6 +182,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
       "episode_cost": m["cost_mean"], "task_return": m.get("task_return"), "eval_episodes": m["episodes"],
       "env_steps": last["step"], "train_wall_s": round(train_s, 1), "eval_wall_s": round(time.time() - t0, 1),
       "stopped_by_budget": stopped_early, "curve": curve, "eval_actions": list(actions),
+      **({} if init is None else {"init_from": os.path.basename(init[0]), "init_seed": init[1]}),
       "by_action": {a: {"completion": v["completion"], "safe_completion": v["safe_completion"],
                         "avg_env_health": v["avg_health"], "episode_cost": v["cost_mean"]}
                     for a, v in by_action.items()},
@@ -172,8 +190,36 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
 
 
 def _std_label(row: dict) -> str:
+  if row.get("init_from"):
+    return f", actor from {row['init_from']} seed {row['init_seed']}"
   std = row.get("recipe", {}).get("init_log_std")
   return "" if std is None else f", initial log-std {std[0]:g}/{std[1]:g}"
+
+
+def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
+  """(file, seed) of ``--init-from``/``--init-seed``: a checkpoint of our trainer on ``task`` whose actor is
+  this recipe's policy network (same MLP, activation, observation normalisation), else ValueError naming the flag."""
+  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+  try:
+    meta = ckpt.read_meta(file)
+    cfg = PPOConfig.from_json(meta["config"])
+  except (ValueError, KeyError, TypeError) as e:
+    raise ValueError(f"init_from: {e}") from None
+  if meta.get("task") not in (None, task):
+    raise ValueError(f"init_from: {file} was trained on {meta['task']!r}, not --task {task!r}")
+  want = dict(policy_hidden_sizes=POLICY_LAYERS, activation="swish",
+              normalize_observations=PLAYGROUND_PANDA_PICK_CUBE["normalize_observations"])
+  for k, v in want.items():
+    if getattr(cfg, k) != v:
+      raise ValueError(f"init_from: {file} has {k} = {getattr(cfg, k)!r}; this recipe's actor needs {v!r}")
+  seeds = list(cfg.seeds)
+  if seed is None:
+    if len(seeds) != 1:
+      raise ValueError(f"init_seed: {file} holds seeds {','.join(map(str, seeds))}; say which with --init-seed")
+    seed = seeds[0]
+  if seed not in seeds:
+    raise ValueError(f"init_seed: {seed} is not a seed of {file} (its seeds: {','.join(map(str, seeds))})")
+  return file, seed
 
 
 def _settings_label(row: dict, doc: dict) -> str:
@@ -199,7 +245,8 @@ def _robot_named(settings: dict | None) -> dict | None:
 def _key(row: dict):
   """A rerun with the same weight, seed and settings replaces its row; other rows are kept."""
   return (row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True),
-          json.dumps(_robot_named(row.get("task_settings")), sort_keys=True))
+          json.dumps(_robot_named(row.get("task_settings")), sort_keys=True),
+          row.get("init_from"), row.get("init_seed"))
 
 
 def render_md(doc: dict) -> str:
@@ -271,6 +318,11 @@ def parse_args(argv=None):
   p.add_argument("--init-log-std", default=None, metavar="ARM,GRIPPER",
                  help="initial log-std of the policy (pre-tanh; gripper = last action dim), as our trainer's "
                       "--init-log-std; write --init-log-std=-0.5,-1.5. Default: brax's init (std ≈ 1.3)")
+  p.add_argument("--init-from", default=None, metavar="CHECKPOINT",
+                 help="start from the actor and observation normaliser of a checkpoint of our trainer (a run "
+                      "directory, checkpoint.npz or an rl_multiseed --export-policy file) with the recipe's "
+                      "networks; brax's value function starts fresh")
+  p.add_argument("--init-seed", type=int, default=None, help="with --init-from: which of its seeds")
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="task keyword arguments over its RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; rows record them")
@@ -313,6 +365,11 @@ def parse_args(argv=None):
   a.actions = tuple(x.strip() for x in a.eval_actions.split(",") if x.strip())
   if not a.actions or len(set(a.actions)) != len(a.actions) or not set(a.actions) <= set(POLICY_ACTIONS):
     raise ValueError(f"eval_actions: distinct values of {','.join(POLICY_ACTIONS)}, got {a.eval_actions!r}")
+  a.init = None
+  if a.init_seed is not None and a.init_from is None:
+    raise ValueError("init_seed: picks a seed of the --init-from checkpoint; give --init-from")
+  if a.init_from is not None:
+    a.init = check_init(a.init_from, a.init_seed, a.task)
   a.settings = tasks.rl_settings(a.task, a.task_settings)
   if "damage_weight" in a.settings:
     raise ValueError("task_settings: damage_weight is set by --damage-weights, not here")
@@ -378,7 +435,7 @@ def main(argv=None) -> int:
   for w in a.weights:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
-      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions)
+      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "

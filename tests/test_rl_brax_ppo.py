@@ -1,11 +1,14 @@
 """benchmarks/rl_brax_ppo.py: the second trainer's settings are what it says (no training here)."""
 
+import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
 from conftest import load_benchmark
+
+from train.policy import load_policy
 
 R = load_benchmark("rl_brax_ppo")
 
@@ -159,3 +162,51 @@ def test_reward_preference_noisy_style_adds_gaussian_noise_to_the_scripted_actio
   acts = jax.vmap(lambda k: P.noisy_policy(base, 0.3)(None, k))(jax.random.split(jax.random.PRNGKey(0), 4096))
   assert float(jnp.max(acts)) <= 1.0 and float(jnp.min(acts)) >= -1.0
   assert abs(float(jnp.mean(acts)) - 0.5) < 0.02 and abs(float(jnp.std(acts)) - 0.3) < 0.02
+
+
+EGG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks", "results",
+                   "rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz")  # ours, seeds 3,4,5
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--init-seed", "4"], "init_seed: picks a seed"),
+    (["--init-from", "no/such/file.npz"], "init_from: checkpoint: no checkpoint file"),
+    (["--task", "place_plate", "--init-from", EGG, "--init-seed", "4"], "init_from: .* was trained on 'pick_egg'"),
+    (["--init-from", EGG], "init_seed: .* holds seeds 3,4,5; say which"),
+    (["--init-from", EGG, "--init-seed", "7"], r"init_seed: 7 is not a seed .*\(its seeds: 3,4,5\)"),
+])
+def test_bad_init_from_is_refused_naming_it(argv, says):
+  with pytest.raises(ValueError, match=says):
+    R.parse_args((["--task", "pick_egg"] if "--task" not in argv else []) + argv)
+
+
+def test_init_from_hands_brax_our_actor_and_a_fresh_value_function(monkeypatch):
+  """brax's ppo.train gets that seed's normaliser and policy weights (restore_params), not its value net."""
+  got = {}
+
+  class Stop(Exception):
+    pass
+
+  def fake_train(**kw):
+    got.update(kw)
+    raise Stop
+
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  a = R.parse_args(["--task", "pick_egg", "--init-from", EGG, "--init-seed", "4"])
+  with pytest.raises(Stop):
+    R.train_one("pick_egg", 2.0, 0, dict(R.PLAYGROUND_PANDA_PICK_CUBE), None, a.settings, init=a.init)
+  env = R.tasks.make("pick_egg", **a.settings)
+  want = load_policy(EGG, env, seed=4).params
+  normaliser, policy, value = got["restore_params"]
+  assert value is None and got["restore_value_fn"] is False
+  for x, y in zip(jax.tree.leaves((normaliser, policy)), jax.tree.leaves(want), strict=True):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+  other = load_policy(EGG, env, seed=3).params[1]
+  assert not all(np.array_equal(np.asarray(x), np.asarray(y))
+                 for x, y in zip(jax.tree.leaves(policy), jax.tree.leaves(other)))
+
+
+def test_a_row_from_a_trained_actor_says_so_and_keeps_its_own_key():
+  a = {"damage_weight": 2.0, "seed": 0, "recipe": {}, "task_settings": {}}
+  b = dict(a, init_from="p.npz", init_seed=4)
+  assert R._std_label(b) == ", actor from p.npz seed 4" and R._key(a) != R._key(b)
