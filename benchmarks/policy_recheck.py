@@ -5,7 +5,8 @@ takes the weights it exported (``--export-policy``: ``rl_<task>_<device>_<tag>_<
 beside the results) and evaluates chosen seeds again here, on MJX-JAX and on native MuJoCo (C, CPU threads):
 another machine, another episode sample and, with ``native``, another implementation of the physics, so a
 trained behaviour that only exists in one simulator build shows up as a disagreement. The task and its settings
-come from the checkpoint (``tasks.stored_kwargs``); the scripted safe/unsafe policies can be added as references.
+come from the checkpoint (``tasks.stored_kwargs``); the scripted safe/unsafe policies can be added as references,
+and run on the checkpoints' settings when those agree (``--task-arg`` adds to them).
 
 Policies are the CLI's specs (``mjx-damage eval --policy``): ``checkpoint[+sample|+mean]:FILE#SEED``,
 ``scripted:safe``, ``scripted:unsafe``, ``zero``, ``random``.
@@ -63,8 +64,13 @@ def parse(argv=None):
     if not args.backends or len(set(args.backends)) != len(args.backends):
       raise ValueError(f"backends: give each of {', '.join(BACKENDS)} at most once, at least one")
     E.check_args(args.episodes, 1.0, 95.0, seed=args.seed)
-    args.overrides = [R.task_overrides(args.task, R.policy_task_kwargs(s, args.task), None, args.task_arg)
-                      for s in args.policies]  # also reads every checkpoint (its task, its seed)
+    trained = {s: R.policy_task_kwargs(s, args.task) for s in args.policies  # reads every checkpoint
+               if R.parse_policy_spec(s)[0] == "checkpoint"}
+    # the other policies (scripted references …) run where the checkpoints were trained, when they agree
+    common = next(iter(trained.values())) if trained and all(k == next(iter(trained.values()))
+                                                             for k in trained.values()) else {}
+    args.overrides = [R.task_overrides(args.task, trained.get(s, common), None, args.task_arg)
+                      for s in args.policies]
     built = {}  # one env per distinct setting; making it checks the settings' values (nothing compiles)
     args.envs = [built.setdefault(json.dumps(o, sort_keys=True), R.make_task(args.task, **o))
                  for o in args.overrides]

@@ -81,3 +81,12 @@ def test_a_committed_safe_carry_scores_safe_on_native_mujoco(tmp_path):
   assert row["completion"] >= 0.75 and row["safe_completion"] >= 0.75
   md = open(tmp_path / "policy_recheck_pick_egg_t.md").read()
   assert "benchmarks/policy_recheck.py" in md and "| `checkpoint:" in md and "#1` | native |" in md
+
+
+def test_references_run_where_the_checkpoints_were_trained():
+  """A scripted reference beside checkpoints gets their task settings (robot, start …) without --task-arg."""
+  a = recheck.parse(["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1,scripted:safe"])
+  ckpt_kw, ref_kw = a.overrides
+  assert ref_kw == ckpt_kw and ref_kw["robot"] == "gripper" and ref_kw["start"] == "pregrasp"
+  alone = recheck.parse(["--task", "pick_egg", "--policies", "scripted:safe"]).overrides[0]
+  assert alone.get("start") != "pregrasp"
