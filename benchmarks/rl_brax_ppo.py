@@ -67,9 +67,9 @@ from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
 import tasks  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
-from train import checkpoint as ckpt  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.policy import load_policy  # noqa: E402
+from train.ppo import init_source  # noqa: E402
 from train.evaluate import evaluate, parametrized_policy  # noqa: E402
 from train.networks import POLICY_ACTIONS, init_policy, policy_apply  # noqa: E402
 
@@ -199,14 +199,7 @@ def _std_label(row: dict) -> str:
 def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
   """(file, seed) of ``--init-from``/``--init-seed``: a checkpoint of our trainer on ``task`` whose actor is
   this recipe's policy network (same MLP, activation, observation normalisation), else ValueError naming the flag."""
-  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
-  try:
-    meta = ckpt.read_meta(file)
-    cfg = PPOConfig.from_json(meta["config"])
-  except (ValueError, KeyError, TypeError) as e:
-    raise ValueError(f"init_from: {e}") from None
-  if meta.get("task") not in (None, task):
-    raise ValueError(f"init_from: {file} was trained on {meta['task']!r}, not --task {task!r}")
+  file, _, cfg = init_source(path, task)
   want = dict(policy_hidden_sizes=POLICY_LAYERS, activation="swish",
               normalize_observations=PLAYGROUND_PANDA_PICK_CUBE["normalize_observations"])
   for k, v in want.items():

@@ -278,20 +278,15 @@ def parse(argv):
   if args.critic_warmup_iterations and not args.init_from:
     p.error("--critic-warmup-iterations: holds a pre-trained actor while the critic learns; give --init-from")
   if args.init_from:
-    from train import checkpoint as ckpt
-    file = os.path.join(args.init_from, ckpt.FILENAME) if os.path.isdir(args.init_from) else args.init_from
+    from train.ppo import init_source
     try:
-      meta = ckpt.read_meta(file)
+      file, _, src = init_source(args.init_from, args.task)
     except ValueError as e:
-      p.error(f"--init-from: {e}")
-    src_task, src_seeds = meta.get("task"), len(meta.get("config", {}).get("seeds", ()))
-    if src_task not in (None, args.task):
-      p.error(f"--init-from: {file} was trained on {src_task!r}, not --task {args.task!r}")
-    if args.init_seed is not None and args.init_seed not in meta.get("config", {}).get("seeds", ()):
-      p.error(f"--init-seed: {args.init_seed} is not a seed of {file} (its seeds: "
-              f"{','.join(map(str, meta['config']['seeds']))})")
-    if args.init_seed is None and src_seeds not in (1, len(args.seeds)):
-      p.error(f"--init-from: {file} holds {src_seeds} seeds; give one seed or as many as --seeds "
+      p.error(f"--init-from: {str(e).removeprefix('init_from: ')}")
+    if args.init_seed is not None and args.init_seed not in src.seeds:
+      p.error(f"--init-seed: {args.init_seed} is not a seed of {file} (its seeds: {','.join(map(str, src.seeds))})")
+    if args.init_seed is None and len(src.seeds) not in (1, len(args.seeds)):
+      p.error(f"--init-from: {file} holds {len(src.seeds)} seeds; give one seed or as many as --seeds "
               f"({len(args.seeds)})")
   if args.resume and not args.work_dir:
     p.error("--resume: give --work-dir, the folder of the runs to continue")

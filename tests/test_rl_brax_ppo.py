@@ -170,8 +170,8 @@ EGG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 
 @pytest.mark.parametrize("argv, says", [
     (["--init-seed", "4"], "init_seed: picks a seed"),
-    (["--init-from", "no/such/file.npz"], "init_from: checkpoint: no checkpoint file"),
-    (["--task", "place_plate", "--init-from", EGG, "--init-seed", "4"], "init_from: .* was trained on 'pick_egg'"),
+    (["--init-from", "no/such/file.npz"], "init_from: no checkpoint at"),
+    (["--task", "place_plate", "--init-from", EGG, "--init-seed", "4"], "init_from: .* made for task 'pick_egg'"),
     (["--init-from", EGG], "init_seed: .* holds seeds 3,4,5; say which"),
     (["--init-from", EGG, "--init-seed", "7"], r"init_seed: 7 is not a seed .*\(its seeds: 3,4,5\)"),
 ])

@@ -169,8 +169,8 @@ def test_a_ramp_without_warmup_is_labelled_as_one():
     (["--critic-warmup-iterations", "-1"], "--critic-warmup-iterations", ">= 0"),
     (["--critic-warmup-iterations", "5"], "--critic-warmup-iterations", "give --init-from"),
     (["--init-seed", "4"], "--init-seed", "give --init-from"),
-    (["--init-from", "no/such/run"], "--init-from", "no checkpoint file"),
-    (["--init-from", EGG_POLICY], "--init-from", "trained on 'pick_egg'"),  # --task defaults to place_plate
+    (["--init-from", "no/such/run"], "--init-from", "no checkpoint at"),
+    (["--init-from", EGG_POLICY], "--init-from", "made for task 'pick_egg'"),  # --task defaults to place_plate
     (["--task", "pick_egg", "--init-from", EGG_POLICY, "--init-seed", "9"], "--init-seed", "its seeds: 3,4,5"),
     (["--task", "pick_egg", "--init-from", EGG_POLICY, "--seeds", "0,1"], "--init-from", "holds 3 seeds"),
 ])
@@ -186,7 +186,7 @@ def test_a_corrupt_init_from_is_refused(tmp_path, capsys):
   bad.write_bytes(b"not a checkpoint")
   with pytest.raises(SystemExit):
     rl_multiseed.parse(["--init-from", str(bad)])
-  assert "--init-from: checkpoint:" in capsys.readouterr().err
+  assert "--init-from: " in (err := capsys.readouterr().err) and "is not a readable checkpoint" in err
 
 
 def test_init_from_reaches_every_method_with_its_seed_and_warmup():

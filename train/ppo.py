@@ -161,9 +161,9 @@ def check_memory(trainer: Trainer, cfg: PPOConfig, available=None, num_devices: 
 ACTOR_FIELDS = ("policy_hidden_sizes", "activation", "normalize_observations")  # what fixes the actor's shape
 
 
-def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str,
-                    init_seed: Optional[int] = None) -> str:
-  """The checkpoint file behind ``init_from``, checked against this run (``ValueError("init_from: …")``)."""
+def init_source(path: str, task_name: str) -> tuple[str, dict, PPOConfig]:
+  """(file, metadata, config) of a checkpoint to start an actor from (a run directory or a file), made for
+  ``task_name``; else ``ValueError("init_from: …")``. Reads only the metadata."""
   path = os.fspath(path)
   file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
   if not os.path.isfile(file):
@@ -175,6 +175,13 @@ def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str,
     raise ValueError(f"init_from: {file} is not a readable checkpoint ({e})") from None
   if meta.get("task") not in (None, task_name):
     raise ValueError(f"init_from: {file} was made for task {meta['task']!r}, this run trains {task_name!r}")
+  return file, meta, src
+
+
+def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str,
+                    init_seed: Optional[int] = None) -> str:
+  """The checkpoint file behind ``init_from``, checked against this run (``ValueError("init_from: …")``)."""
+  file, meta, src = init_source(path, task_name)
   sizes = (int(meta.get("obs_size", -1)), int(meta.get("action_size", -1)))
   if sizes != (trainer.obs_size, trainer.action_size):
     raise ValueError(f"init_from: {file} has observation/action sizes {sizes}, this task "
