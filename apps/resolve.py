@@ -154,7 +154,7 @@ def parse_policy_spec(spec) -> tuple[str, Optional[str]]:
     if not os.path.exists(path):
       raise ValueError(f"policy: checkpoint {path!r} does not exist")
     if seed is not None:
-      file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+      file = ckpt.file_of(path)
       seeds = ckpt.read_meta(file).get("config", {}).get("seeds", [])
       if seed not in seeds:
         raise ValueError(f"policy: seed {seed} is not a seed of checkpoint {path!r} (its seeds: "
@@ -212,7 +212,7 @@ def program_description(command: str, task: str, policy_spec: str, **fields) -> 
   desc = {"command": command, "task": task, "policy": policy_spec, **fields}
   kind, arg = parse_policy_spec(policy_spec)
   if kind == "checkpoint":
-    file = os.path.join(arg, ckpt.FILENAME) if os.path.isdir(arg) else arg
+    file = ckpt.file_of(arg)
     desc["checkpoint"] = ckpt.read_meta(file)
   return desc
 
@@ -273,7 +273,7 @@ def policy_task_kwargs(policy_spec: str, task: str) -> dict:
 def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
   """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
   path = _split_seed(policy_spec.partition(":")[2])[0]
-  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+  file = ckpt.file_of(path)
   try:
     meta = ckpt.read_meta(file)
   except Exception as e:  # not a readable checkpoint

@@ -33,6 +33,11 @@ from mjx_damage import io
 FILENAME = "checkpoint.npz"
 
 
+def file_of(path: str) -> str:
+  """A run directory's ``checkpoint.npz``, or ``path`` itself (a checkpoint file)."""
+  return os.path.join(path, FILENAME) if os.path.isdir(path) else path
+
+
 def save(path: str, state: Any, policy: Any, meta: dict) -> None:
   """Write ``state`` and ``policy`` leaves and ``meta`` (JSON-able) to ``path`` atomically."""
   arrays = {}

@@ -268,7 +268,7 @@ def main(argv=None) -> int:
       if args["init_from"] is None:
         raise ValueError("--init-seed: picks a seed of the --init-from checkpoint; give --init-from")
       src = args["init_from"]
-      seeds = ckpt.read_meta(os.path.join(src, ckpt.FILENAME) if os.path.isdir(src) else src)["config"]["seeds"]
+      seeds = ckpt.read_meta(ckpt.file_of(src)).get("config", {}).get("seeds", [])
       if args["init_seed"] not in seeds:
         raise ValueError(f"--init-seed: {args['init_seed']} is not a seed of {src} (its seeds: "
                          f"{', '.join(map(str, seeds))})")

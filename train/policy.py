@@ -32,7 +32,7 @@ def load_policy(path: str, env=None, deterministic: bool = True, seed: Optional[
   if action is not None and action not in N.POLICY_ACTIONS:
     raise ValueError(f"action: {action!r} is not one of {', '.join(N.POLICY_ACTIONS)}")
   path = os.fspath(path)
-  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+  file = ckpt.file_of(path)
   if not os.path.isfile(file):
     raise ValueError(f"path: no checkpoint at {file}")
   meta = ckpt.read_meta(file)

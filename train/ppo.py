@@ -165,7 +165,7 @@ def init_source(path: str, task_name: str) -> tuple[str, dict, PPOConfig]:
   """(file, metadata, config) of a checkpoint to start an actor from (a run directory or a file), made for
   ``task_name``; else ``ValueError("init_from: …")``. Reads only the metadata."""
   path = os.fspath(path)
-  file = os.path.join(path, ckpt.FILENAME) if os.path.isdir(path) else path
+  file = ckpt.file_of(path)
   if not os.path.isfile(file):
     raise ValueError(f"init_from: no checkpoint at {file}")
   try:
