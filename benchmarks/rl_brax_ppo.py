@@ -267,10 +267,12 @@ def render_md(doc: dict) -> str:
   if several:
     lines += ["", "Final policy by action (the same weights; mode = brax's deterministic policy, sample = one draw "
               "per step, the policy PPO trains, mean = E[tanh(u)] from 32 draws):", "",
-              "| reward | seed | action | completion | safe completion | episode cost |", "|---|---|---|---|---|---|"]
+              "| reward | seed | env-steps | action | completion | safe completion | episode cost |",
+              "|---|---|---|---|---|---|---|"]
     for r in several:
       for a, v in r["by_action"].items():
-        lines.append(f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} | {a} "
+        lines.append(f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} "
+                     f"| {r['env_steps'] / 1e6:.2f} M | {a} "
                      f"| {100 * v['completion']:.1f} % | {100 * v['safe_completion']:.1f} % | {v['episode_cost']:.2f} |")
   if doc.get("notes"):
     lines += ["", *doc["notes"]]

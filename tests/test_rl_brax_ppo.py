@@ -105,7 +105,7 @@ def test_rows_say_which_action_scored_them():
   doc = {"task": "place_plate", "task_settings": {}, "device": "cpu", "recipe": {}, "rows": [row]}
   md = R.render_md(doc)
   assert "| task reward only, sample action | 0 |" in md
-  assert "| task reward only | 0 | mode | 100.0 % | 50.0 % |" in md
+  assert "| task reward only | 0 | 0.00 M | mode | 100.0 % | 50.0 % |" in md  # env-steps tell runs of one seed apart
   old = {k: x for k, x in row.items() if k not in ("eval_actions", "by_action")}  # before the flag: the mode
   assert "| task reward only | 0 |" in R.render_md(dict(doc, rows=[old])) and "by action" not in R.render_md(dict(doc, rows=[old]))
 
