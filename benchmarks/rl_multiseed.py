@@ -47,6 +47,10 @@ call continues it with --resume (the row lists every call)::
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --tag paper_task_only --results-dir $OUT
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --resume --tag paper_task_only --results-dir $OUT
 
+``--anneal-lr --timesteps N``: the learning rate (1e-3 in the playground preset) decays linearly to 0 over
+N env steps per seed instead of staying constant (the paper preset always anneals); for long runs whose
+late iterates collapse (docs/rl_task_design.md, Pick Egg's penalty phase).
+
 CPU plumbing check (learns nothing)::
 
     python benchmarks/rl_multiseed.py --num-envs 16 --budget-seconds 60 --seeds 0,1 --eval-episodes 16
@@ -121,6 +125,9 @@ def method_spec(name: str, args) -> dict:
                    if args.critic_warmup_iterations else ""),
                 init_from=args.init_from, init_seed=args.init_seed,
                 critic_warmup_iterations=args.critic_warmup_iterations)
+  if args.anneal_lr and spec["preset"] != "paper":  # the paper preset anneals already
+    spec = dict(spec, label=spec["label"] + f", lr annealed to 0 over {args.timesteps:.3g} steps",
+                anneal_learning_rate=True)
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
@@ -151,7 +158,11 @@ def parse(argv):
   p.add_argument("--seeds", type=_ints, default=(0, 1, 2, 3, 4))
   p.add_argument("--preset", default="playground", help="preset of the non-paper methods (train/config.py)")
   p.add_argument("--budget-seconds", type=float, default=300.0, help="training wall clock per method, compile incl.")
-  p.add_argument("--timesteps", type=float, default=1e9, help="env steps per seed (upper bound; the budget stops first)")
+  p.add_argument("--timesteps", type=float, default=None,
+                 help="env steps per seed (upper bound; the budget stops first; default 1e9)")
+  p.add_argument("--anneal-lr", action="store_true",
+                 help="non-paper methods: the learning rate decays linearly to 0 over --timesteps (give it too; "
+                      "the paper preset always anneals)")
   p.add_argument("--paper-timesteps", type=float, default=1e7,
                  help="env steps per seed of the paper methods: their lr anneals linearly to 0 over this many")
   p.add_argument("--num-envs", type=int, default=None, help="envs per seed (default: the preset's)")
@@ -231,6 +242,11 @@ def parse(argv):
     p.error(f"--seeds: distinct integers, got {args.seeds}")
   if args.budget_seconds <= 0:
     p.error("--budget-seconds: must be > 0")
+  if args.timesteps is not None and not (1 <= args.timesteps < math.inf):
+    p.error(f"--timesteps: env steps per seed, a number >= 1, got {args.timesteps}")
+  if args.anneal_lr and args.timesteps is None:
+    p.error("--anneal-lr: the rate decays to 0 over --timesteps; give --timesteps (env steps per seed) too")
+  args.timesteps = 1e9 if args.timesteps is None else args.timesteps
   try:
     args.pid_gains = tuple(float(x) for x in args.pid_gains.split(","))
   except ValueError:

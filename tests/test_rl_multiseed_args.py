@@ -30,6 +30,9 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--damage-warmup-steps", "-1"], "--damage-warmup-steps"),
     (["--damage-ramp-steps", "1e6", "--methods", "pid"], "--damage-ramp-steps"),
     (["--damage-warmup-steps", "1e6", "--damage-weight", "0"], "--damage-warmup-steps"),
+    (["--timesteps", "-1"], "--timesteps"),
+    (["--timesteps", "nan"], "--timesteps"),
+    (["--anneal-lr"], "--anneal-lr"),  # over the default 1e9 steps it would barely decay
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -158,6 +161,16 @@ def test_damage_schedule_reaches_the_penalty_method():
 
 EGG_POLICY = os.path.join(ROOT, "benchmarks", "results",
                           "rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz")  # seeds 3,4,5
+
+
+def test_anneal_lr_reaches_the_playground_methods_and_names_its_horizon():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty,paper", "--anneal-lr", "--timesteps", "4.5e7"])
+  for m in ("task_only", "penalty"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert spec["anneal_learning_rate"] is True and "lr annealed to 0 over 4.5e+07 steps" in spec["label"]
+  assert "anneal_learning_rate" not in rl_multiseed.method_spec("paper", a)  # the preset anneals already
+  plain = rl_multiseed.parse(["--methods", "penalty"])
+  assert plain.timesteps == 1e9 and "anneal_learning_rate" not in rl_multiseed.method_spec("penalty", plain)
 
 
 def test_a_ramp_without_warmup_is_labelled_as_one():
