@@ -36,6 +36,11 @@ and the fixed w of the row (brax has no critic warm-up or w ramp), e.g. the crus
         --init-from benchmarks/results/rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz \
         --init-seed 4 --eval-actions mode,sample --out-dir $OUT
 
+``--export-policy`` keeps each run's final weights (brax's normaliser and policy, ≈ 0.05 MB) beside the
+results as a policy file of our format, so they can come back from a device call and be scored again
+elsewhere (``benchmarks/policy_recheck.py --policies checkpoint:STEM_w2_s0_policy.npz``) or continued by
+either trainer (``--init-from``).
+
 CPU plumbing check (learns nothing)::
 
     PYTHONPATH=. .venv/bin/python benchmarks/rl_brax_ppo.py --task place_plate --damage-weights 0,2 --seeds 0 \
@@ -67,6 +72,7 @@ from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
 import tasks  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
+from train import checkpoint as ckpt  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.policy import load_policy  # noqa: E402
 from train.ppo import init_source  # noqa: E402
@@ -119,8 +125,42 @@ def network_factory(init_log_std: tuple[float, float] | None):
   return make
 
 
+def export_policy(path: str, params, env, task: str, settings: dict, weight: float, seed: int, cfg: dict,
+                  env_steps: int, init: tuple[str, int] | None = None) -> None:
+  """Write brax's final policy ``params`` ((normaliser, policy weights[, value weights])) as a policy-only
+  checkpoint of our format at ``path``: what ``train.load_policy``, ``--init-from`` of our trainer and of this
+  script, and every ``checkpoint:PATH`` policy spec (eval, sweep, policy_recheck.py) read.
+
+  The recipe's networks are our playground preset's (same MLPs, activation, normaliser: :func:`check_init`
+  holds the reverse direction to that), so its config records the preset with this run's sizes and seed;
+  ``meta["trainer"]`` says brax trained it. The value function is not kept (nothing reads it).
+  """
+  obs_size = int(jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape[-1])
+  ours = PPOConfig.preset(
+      "playground", seeds=(int(seed),), damage_weight=float(weight), episode_length=int(env.unwrapped.episode_length),
+      num_timesteps=int(cfg["num_timesteps"]), num_envs=cfg["num_envs"], batch_size=cfg["batch_size"],
+      num_minibatches=cfg["num_minibatches"], num_updates_per_batch=cfg["num_updates_per_batch"],
+      unroll_length=cfg["unroll_length"], learning_rate=cfg["learning_rate"], entropy_cost=cfg["entropy_cost"],
+      discounting=cfg["discounting"], reward_scaling=cfg["reward_scaling"],
+      init_log_std=None if cfg.get("init_log_std") is None else tuple(cfg["init_log_std"]))
+  meta = {"task": task, "task_kwargs": settings, "kind": "brax_ppo", "config": ours.to_json(),
+          "obs_size": obs_size, "action_size": int(env.action_size), "env_steps": int(env_steps),
+          "trainer": "brax.training.agents.ppo.train, the recipe of benchmarks/rl_brax_ppo.py",
+          "init_from": None if init is None else os.path.basename(init[0]),
+          "init_seed": None if init is None else init[1]}
+  one_seed = jax.tree.map(lambda x: np.asarray(x)[None], (params[0], params[1]))  # the seed axis of our files
+  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+  ckpt.save(path, (), one_seed, meta)
+
+
+def policy_path(stem: str, weight: float, seed: int) -> str:
+  """Where ``--export-policy`` writes the policy of the run (weight, seed) of the results ``stem``."""
+  return f"{stem}_w{weight:g}_s{seed}_policy.npz"
+
+
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
-              settings: dict | None = None, actions=("mode",), init: tuple[str, int] | None = None) -> dict:
+              settings: dict | None = None, actions=("mode",), init: tuple[str, int] | None = None,
+              export: str | None = None) -> dict:
   """One brax PPO run, then the 1024-episode evaluation of its final policy; a result row.
 
   ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
@@ -128,6 +168,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   policy, sample, mean); the first gives the row's columns, every one is kept in ``by_action``.
   ``init``: (checkpoint file, seed): brax starts from that actor and observation normaliser of our trainer
   (the same brax networks, :func:`check_init`), with its own fresh value function (``restore_value_fn=False``).
+  ``export``: also write the final policy there (:func:`export_policy`), before it is scored.
   """
   settings = dict(RL_SETTINGS.get(task, {}) if settings is None else settings)
   env = tasks.make(task, damage_weight=weight, **settings)
@@ -168,6 +209,8 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   train_s = time.time() - t_start
 
   make_policy = last["make_policy"]
+  if export is not None:
+    export_policy(export, last["params"], env, task, settings, weight, seed, cfg, last["step"], init)
   t0 = time.time()
   by_action = {}
   for action in actions:
@@ -183,6 +226,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
       "env_steps": last["step"], "train_wall_s": round(train_s, 1), "eval_wall_s": round(time.time() - t0, 1),
       "stopped_by_budget": stopped_early, "curve": curve, "eval_actions": list(actions),
       **({} if init is None else {"init_from": os.path.basename(init[0]), "init_seed": init[1]}),
+      **({} if export is None else {"policy_file": os.path.basename(export)}),
       "by_action": {a: {"completion": v["completion"], "safe_completion": v["safe_completion"],
                         "avg_env_health": v["avg_health"], "episode_cost": v["cost_mean"]}
                     for a, v in by_action.items()},
@@ -323,6 +367,10 @@ def parse_args(argv=None):
                       "'{\"start\": \"pregrasp\"}'; rows record them")
   p.add_argument("--out-dir", default=RESULTS)
   p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
+  p.add_argument("--export-policy", action="store_true",
+                 help="also write each run's final policy beside the results, STEM_w<W>_s<SEED>_policy.npz "
+                      "(our checkpoint format, ≈ 0.05 MB: re-scored by policy_recheck.py or eval, or an "
+                      "--init-from of either trainer)")
   p.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                  help="train nothing: merge the rows of these results files (runs of one task made by "
                       "separate processes, e.g. several on one GPU) into --out, or OUT_DIR/rl_brax_<task>_<device "
@@ -420,6 +468,12 @@ def main(argv=None) -> int:
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
              eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}))
   stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
+  if a.export_policy:  # a policy file is a run's only copy of its weights: never replaced, refused before training
+    there = [policy_path(stem, w, s) for w in a.weights for s in a.seed_list
+             if os.path.exists(policy_path(stem, w, s))]
+    if there:
+      raise ValueError(f"export_policy: {', '.join(there)} already exist (weights of an earlier run); "
+                       "move them, or write this run elsewhere with --out")
   doc = {"task": a.task, "task_settings": RL_SETTINGS.get(a.task, {}), "device": jax.devices()[0].device_kind,
          "backend": jax.default_backend(), "jax": jax.__version__, "machine": platform.machine(),
          "recipe": {k: v for k, v in cfg.items() if k != "eval_episodes"}, "rows": []}
@@ -430,7 +484,8 @@ def main(argv=None) -> int:
   for w in a.weights:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
-      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init)
+      row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init,
+                      export=policy_path(stem, w, s) if a.export_policy else None)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "

@@ -210,3 +210,48 @@ def test_a_row_from_a_trained_actor_says_so_and_keeps_its_own_key():
   a = {"damage_weight": 2.0, "seed": 0, "recipe": {}, "task_settings": {}}
   b = dict(a, init_from="p.npz", init_seed=4)
   assert R._std_label(b) == ", actor from p.npz seed 4" and R._key(a) != R._key(b)
+
+
+def _brax_final(monkeypatch, params, step=123):
+  """brax's ppo.train replaced by one that hands ``params`` to the run's callbacks, as brax does at its end;
+  the 1024-episode scoring replaced by fixed metrics (nothing compiles)."""
+  def fake_train(progress_fn, policy_params_fn, **kw):
+    progress_fn(step, {"eval/episode_reward": 1.0})
+    policy_params_fn(step, lambda *a, **k: None, params)
+
+  metrics = {"completion": 1.0, "safe_completion": 1.0, "avg_health": 100.0, "cost_mean": 0.0, "episodes": 8}
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  monkeypatch.setattr(R, "evaluate", lambda *a, **k: {"metrics": metrics})
+
+
+def test_export_policy_writes_brax_weights_that_every_reader_of_ours_takes(monkeypatch, tmp_path):
+  """The exported file is a policy of our format: load_policy gives back exactly brax's weights, and it can
+  start either trainer (init_source, check_init) with its run's seed."""
+  a = R.parse_args(["--task", "pick_egg", "--init-from", EGG, "--init-seed", "4", "--export-policy"])
+  env = R.tasks.make("pick_egg", **a.settings)
+  brax_params = (*load_policy(EGG, env, seed=4).params, "value weights, not kept")
+  _brax_final(monkeypatch, brax_params)
+  path = str(tmp_path / "sub" / R.os.path.basename(R.policy_path("stem", 2.0, 7)))
+  cfg = dict(R.PLAYGROUND_PANDA_PICK_CUBE, eval_episodes=8)
+  row = R.train_one("pick_egg", 2.0, 7, cfg, None, a.settings, init=a.init, export=path)
+  assert row["policy_file"] == "stem_w2_s7_policy.npz" and os.path.isfile(path)
+  got = load_policy(path, env)
+  assert got.seed == 7 and got.meta["kind"] == "brax_ppo" and got.meta["env_steps"] == 123
+  assert got.meta["init_seed"] == 4 and got.meta["config"]["damage_weight"] == 2.0
+  for x, y in zip(jax.tree.leaves(got.params), jax.tree.leaves(brax_params[:2]), strict=True):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+  assert R.check_init(path, None, "pick_egg") == (path, 7)
+  with pytest.raises(ValueError, match="made for task 'pick_egg'"):
+    R.check_init(path, None, "place_plate")
+
+
+def test_export_policy_never_replaces_an_earlier_runs_weights(tmp_path):
+  stem = str(tmp_path / "rl_brax_pick_egg_x")
+  earlier = R.policy_path(stem, 2.0, 1)
+  with open(earlier, "wb") as f:
+    f.write(b"weights of an earlier run")
+  with pytest.raises(ValueError, match=r"export_policy: .*_w2_s1_policy.npz already exist"):
+    R.main(["--task", "pick_egg", "--damage-weights", "0,2", "--seeds", "0,1", "--export-policy", "--out", stem])
+  with open(earlier, "rb") as f:
+    assert f.read() == b"weights of an earlier run"
+  assert not os.path.exists(stem + ".json")  # refused before any run
