@@ -142,6 +142,7 @@ def export_policy(path: str, params, env, task: str, settings: dict, weight: flo
       num_minibatches=cfg["num_minibatches"], num_updates_per_batch=cfg["num_updates_per_batch"],
       unroll_length=cfg["unroll_length"], learning_rate=cfg["learning_rate"], entropy_cost=cfg["entropy_cost"],
       discounting=cfg["discounting"], reward_scaling=cfg["reward_scaling"],
+      max_grad_norm=None,  # brax's ppo.train default, which the recipe keeps (ours clips at 1)
       init_log_std=None if cfg.get("init_log_std") is None else tuple(cfg["init_log_std"]))
   meta = {"task": task, "task_kwargs": settings, "kind": "brax_ppo", "config": ours.to_json(),
           "obs_size": obs_size, "action_size": int(env.action_size), "env_steps": int(env_steps),

@@ -238,6 +238,7 @@ def test_export_policy_writes_brax_weights_that_every_reader_of_ours_takes(monke
   got = load_policy(path, env)
   assert got.seed == 7 and got.meta["kind"] == "brax_ppo" and got.meta["env_steps"] == 123
   assert got.meta["init_seed"] == 4 and got.meta["config"]["damage_weight"] == 2.0
+  assert got.meta["config"]["max_grad_norm"] is None  # the config records what brax ran, not our preset
   for x, y in zip(jax.tree.leaves(got.params), jax.tree.leaves(brax_params[:2]), strict=True):
     np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
   assert R.check_init(path, None, "pick_egg") == (path, 7)
