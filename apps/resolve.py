@@ -179,6 +179,11 @@ def checkpoint_seed(spec: str) -> Optional[int]:
   return _split_seed(spec.partition(":")[2])[1]
 
 
+def checkpoint_path(spec: str) -> str:
+  """The run directory or file a ``checkpoint…:PATH#SEED`` spec names, without its seed."""
+  return _split_seed(spec.partition(":")[2])[0]
+
+
 def checkpoint_action(spec: str) -> str:
   """The action a ``checkpoint…:PATH`` spec asks for: "mode", "sample" or "mean"."""
   return CHECKPOINT_ACTIONS[spec.partition(":")[0]]

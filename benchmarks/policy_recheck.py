@@ -11,6 +11,9 @@ and run on the checkpoints' settings when those agree (``--task-arg`` adds to th
 Policies are the CLI's specs (``mjx-damage eval --policy``): ``checkpoint[+sample|+mean]:FILE#SEED``,
 ``scripted:safe``, ``scripted:unsafe``, ``zero``, ``random``.
 
+Rows of one checkpoint file, action and backend share one compiled evaluator (the weights are its data), so
+re-scoring several seeds of a run compiles once per action and backend.
+
 Writes ``benchmarks/results/policy_recheck_<task>[_<tag>].{json,md}`` with the command.
 
 Usage::
@@ -79,16 +82,36 @@ def parse(argv=None):
   return args
 
 
-def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: int, seed: int) -> dict:
+def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: int, seed: int,
+            shared: dict | None = None) -> dict:
   """``spec`` on ``env`` (``task`` made with ``overrides``) over ``episodes`` episodes of ``backend``:
-  E.evaluate's metrics."""
+  E.evaluate's metrics.
+
+  ``shared``: evaluators kept between calls, one per (checkpoint, action, settings, backend): the seeds of
+  one checkpoint differ only in their weights, which the evaluator takes as data, so one compiled program
+  scores them all (the numbers are those of a fresh evaluator: the same program, the same inputs).
+  """
   policy = R.make_policy(spec, env)
-  env = R.on_backend(env, backend, episodes)
+  T = R.episode_length_of(env, task)
+  key = None
+  if shared is not None and R.parse_policy_spec(spec)[0] == "checkpoint":
+    key = (os.path.realpath(R.checkpoint_path(spec)), R.checkpoint_action(spec),
+           json.dumps(overrides, sort_keys=True), backend)
   t0 = time.perf_counter()
-  res = E.evaluate(env, policy, episodes, seed, episode_length=R.episode_length_of(env, task))
+  if key is not None and key in shared:
+    ev = shared[key]
+  else:
+    env_b = R.on_backend(env, backend, episodes)
+    E.check_args(episodes, 1.0, 95.0, seed=seed)
+    E.check_memory(env_b, episodes)
+    ev = E.make_evaluator(env_b, policy, T)
+    if key is not None:
+      shared[key] = ev
+  per_ep = ev.run(E.episode_keys(seed, episodes), 1.0, params=getattr(policy, "params", None))
+  m = E.metrics(per_ep, ev.env.entity_names)
   return {"policy": spec, "backend": backend, "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
-          **{k: res["metrics"][k] for k in ("completion", "safe_completion", "cost_mean", "avg_health",
-                                            "min_env_health", "task_return")}}
+          **{k: m[k] for k in ("completion", "safe_completion", "cost_mean", "avg_health", "min_env_health",
+                               "task_return")}}
 
 
 def render_md(res: dict) -> str:
@@ -110,10 +133,10 @@ def render_md(res: dict) -> str:
 
 def main(argv=None) -> int:
   args = parse(argv)
-  rows = []
+  rows, shared = [], {}
   for spec, overrides, env in zip(args.policies, args.overrides, args.envs):
     for backend in args.backends:
-      rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed))
+      rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared))
       r = rows[-1]
       print(f"{spec} [{backend}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
             f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)

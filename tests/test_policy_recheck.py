@@ -90,3 +90,19 @@ def test_references_run_where_the_checkpoints_were_trained():
   assert ref_kw == ckpt_kw and ref_kw["robot"] == "gripper" and ref_kw["start"] == "pregrasp"
   alone = recheck.parse(["--task", "pick_egg", "--policies", "scripted:safe"]).overrides[0]
   assert alone.get("start") != "pregrasp"
+
+
+def test_seeds_of_one_checkpoint_share_one_evaluator_and_score_as_a_fresh_one():
+  """Rows of one checkpoint file, action, settings and backend reuse one compiled evaluator (the weights are
+  data); each row's numbers are those of its own evaluator."""
+  a = recheck.parse(["--task", "pick_egg", "--policies",
+                     f"checkpoint:{SAFE}#1,checkpoint:{SAFE}#0,checkpoint+sample:{SAFE}#1,scripted:safe"])
+  shared = {}
+  rows = [recheck.rescore("pick_egg", env, spec, ov, "native", 4, 3, shared)
+          for spec, ov, env in zip(a.policies, a.overrides, a.envs)]
+  assert len(shared) == 2  # mode and sample of the one file; the scripted reference is not kept
+  (ev_mode,) = [ev for k, ev in shared.items() if k[1] == "mode"]
+  assert ev_mode.num_compiled == 1  # seeds 1 and 0 ran one per-step program
+  fresh = recheck.rescore("pick_egg", a.envs[1], a.policies[1], a.overrides[1], "native", 4, 3)
+  assert {k: v for k, v in rows[1].items() if k != "wall_s"} == {k: v for k, v in fresh.items() if k != "wall_s"}
+  assert rows[0]["safe_completion"] != rows[1]["safe_completion"] or rows[0]["task_return"] != rows[1]["task_return"]
