@@ -277,7 +277,7 @@ def policy_task_kwargs(policy_spec: str, task: str) -> dict:
 
 def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
   """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
-  path = _split_seed(policy_spec.partition(":")[2])[0]
+  path = checkpoint_path(policy_spec)
   file = ckpt.file_of(path)
   try:
     meta = ckpt.read_meta(file)
