@@ -294,13 +294,17 @@ def parse(argv):
   if args.critic_warmup_iterations and not args.init_from:
     p.error("--critic-warmup-iterations: holds a pre-trained actor while the critic learns; give --init-from")
   if args.init_from:
+    from train import checkpoint as ckpt
     from train.ppo import init_source
     try:
       file, _, src = init_source(args.init_from, args.task)
     except ValueError as e:
       p.error(f"--init-from: {str(e).removeprefix('init_from: ')}")
-    if args.init_seed is not None and args.init_seed not in src.seeds:
-      p.error(f"--init-seed: {args.init_seed} is not a seed of {file} (its seeds: {','.join(map(str, src.seeds))})")
+    if args.init_seed is not None:
+      try:
+        ckpt.check_seed(file, src.seeds, args.init_seed, "--init-seed")
+      except ValueError as e:
+        p.error(str(e))
     if args.init_seed is None and len(src.seeds) not in (1, len(args.seeds)):
       p.error(f"--init-from: {file} holds {len(src.seeds)} seeds; give one seed or as many as --seeds "
               f"({len(args.seeds)})")

@@ -184,7 +184,7 @@ def test_a_ramp_without_warmup_is_labelled_as_one():
     (["--init-seed", "4"], "--init-seed", "give --init-from"),
     (["--init-from", "no/such/run"], "--init-from", "no checkpoint at"),
     (["--init-from", EGG_POLICY], "--init-from", "made for task 'pick_egg'"),  # --task defaults to place_plate
-    (["--task", "pick_egg", "--init-from", EGG_POLICY, "--init-seed", "9"], "--init-seed", "its seeds: 3,4,5"),
+    (["--task", "pick_egg", "--init-from", EGG_POLICY, "--init-seed", "9"], "--init-seed", "its seeds: 3, 4, 5"),
     (["--task", "pick_egg", "--init-from", EGG_POLICY, "--seeds", "0,1"], "--init-from", "holds 3 seeds"),
 ])
 def test_bad_init_from_names_the_flag_before_anything_runs(argv, field, says, capsys):

@@ -81,6 +81,12 @@ def read_meta(path: str) -> dict:
     raise ValueError(f"checkpoint: {path} has corrupt metadata ({e})") from e
 
 
+def check_seed(file: str, seeds, seed: int, field: str) -> None:
+  """ValueError naming ``field`` unless ``seed`` is one of ``seeds``, the training seeds of checkpoint ``file``."""
+  if seed not in seeds:
+    raise ValueError(f"{field}: {seed} is not a seed of {file} (its seeds: {', '.join(map(str, seeds))})")
+
+
 def restore(path: str, template: Any, which: str = "state") -> Any:
   """Leaves of ``which`` ('state' or 'policy') from ``path`` in the structure of ``template``.
 

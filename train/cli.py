@@ -269,9 +269,7 @@ def main(argv=None) -> int:
         raise ValueError("--init-seed: picks a seed of the --init-from checkpoint; give --init-from")
       src = args["init_from"]
       seeds = ckpt.read_meta(ckpt.file_of(src)).get("config", {}).get("seeds", [])
-      if args["init_seed"] not in seeds:
-        raise ValueError(f"--init-seed: {args['init_seed']} is not a seed of {src} (its seeds: "
-                         f"{', '.join(map(str, seeds))})")
+      ckpt.check_seed(src, seeds, args["init_seed"], "--init-seed")
     if args["time_limit"] is not None and not (math.isfinite(args["time_limit"]) and args["time_limit"] > 0):
       raise ValueError(f"--time-limit: must be a number of seconds > 0, got {args['time_limit']}")
     if args["episode_length"] is not None and args["episode_length"] < 1:

@@ -191,9 +191,7 @@ def check_init_from(path: str, trainer: Trainer, cfg: PPOConfig, task_name: str,
       raise ValueError(f"init_from: {file} has {f} = {getattr(src, f)!r}, this run {getattr(cfg, f)!r} "
                        f"(give --{f.replace('_', '-')} or a matching preset)")
   if init_seed is not None:
-    if init_seed not in src.seeds:
-      raise ValueError(f"init_seed: {init_seed!r} is not a seed of {file} (its seeds: "
-                       f"{', '.join(map(str, src.seeds))})")
+    ckpt.check_seed(file, src.seeds, init_seed, "init_seed")
   elif src.num_seeds not in (1, cfg.num_seeds):
     raise ValueError(f"init_from: {file} holds {src.num_seeds} seeds; this run has {cfg.num_seeds} "
                      "(give a checkpoint of 1 seed, or of as many seeds as the run, or init_seed: one of its seeds)")
