@@ -14,8 +14,8 @@ policy), or with ``--eval-actions sample,mode`` as the sampled policy PPO trains
 action giving the row's columns (docs/safe_rl.md, "Which policy is scored").
 
 Rows go to ``benchmarks/results/rl_brax_<task>_<device>.{json,md}`` (or
-``--out STEM``), one per (damage weight, seed), each with its exact command;
-rows of other runs (weight, seed or settings) already in the file are kept, so one call per
+``--out STEM``), one per run (damage weight, seed), each with its exact command and date;
+rows of other runs already in the file are kept, a second run of the same command included, so one call per
 run builds one table; ``--merge A.json B.json ...`` (no training) combines the files of runs made by
 separate processes, e.g. several runs sharing one GPU. ``--budget-seconds`` stops a run at the first evaluation
 after that much training wall time (the policy of that evaluation is scored).
@@ -255,8 +255,7 @@ def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
     if len(seeds) != 1:
       raise ValueError(f"init_seed: {file} holds seeds {','.join(map(str, seeds))}; say which with --init-seed")
     seed = seeds[0]
-  if seed not in seeds:
-    raise ValueError(f"init_seed: {seed} is not a seed of {file} (its seeds: {','.join(map(str, seeds))})")
+  ckpt.check_seed(file, seeds, seed, "init_seed")
   return file, seed
 
 
@@ -280,11 +279,17 @@ def _robot_named(settings: dict | None) -> dict | None:
   return None if settings is None else {"robot": tasks.UNNAMED_ROBOT, **settings}
 
 
+def _run_label(row: dict) -> str:
+  """When the run was made, to the minute (runs of one command and seed told apart)."""
+  return (row.get("date") or "—")[:16]
+
+
 def _key(row: dict):
-  """A rerun with the same weight, seed and settings replaces its row; other rows are kept."""
+  """One run: its weight, seed, settings and when it was made. A second run of a command is another row (brax's
+  training on a GPU is not bitwise reproducible, so both are evidence); the same run merged twice is one row."""
   return (row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True),
           json.dumps(_robot_named(row.get("task_settings")), sort_keys=True),
-          row.get("init_from"), row.get("init_seed"))
+          row.get("init_from"), row.get("init_seed"), row.get("date"))
 
 
 def render_md(doc: dict) -> str:
@@ -299,26 +304,27 @@ def render_md(doc: dict) -> str:
       f"the row names the action) scored by `train.evaluate.evaluate` on the row's eval episodes (seed {EVAL_SEED}).",
       "",
       "| reward | seed | env-steps | train wall s (incl. compile) | completion | safe completion | avg env health "
-      "| episode cost | eval episodes | command |",
-      "|---|---|---|---|---|---|---|---|---|---|",
+      "| episode cost | eval episodes | run (UTC) | command |",
+      "|---|---|---|---|---|---|---|---|---|---|---|",
   ]
   for r in doc["rows"]:
     lines.append(
         f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)}{_action_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
-        f"| {r['eval_episodes']} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
+        f"| {r['eval_episodes']} | {_run_label(r)} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
   several = [r for r in doc["rows"] if len(r.get("eval_actions", ())) > 1]
   if several:
     lines += ["", "Final policy by action (the same weights; mode = brax's deterministic policy, sample = one draw "
               "per step, the policy PPO trains, mean = E[tanh(u)] from 32 draws):", "",
-              "| reward | seed | env-steps | action | completion | safe completion | episode cost |",
-              "|---|---|---|---|---|---|---|"]
+              "| reward | seed | env-steps | action | completion | safe completion | episode cost | run (UTC) |",
+              "|---|---|---|---|---|---|---|---|"]
     for r in several:
       for a, v in r["by_action"].items():
         lines.append(f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} "
                      f"| {r['env_steps'] / 1e6:.2f} M | {a} "
-                     f"| {100 * v['completion']:.1f} % | {100 * v['safe_completion']:.1f} % | {v['episode_cost']:.2f} |")
+                     f"| {100 * v['completion']:.1f} % | {100 * v['safe_completion']:.1f} % | {v['episode_cost']:.2f} "
+                     f"| {_run_label(r)} |")
   if doc.get("notes"):
     lines += ["", *doc["notes"]]
   return "\n".join(lines) + "\n"
@@ -433,10 +439,10 @@ def _load_results(path: str) -> dict:
 
 
 def _add_row(doc: dict, row: dict) -> None:
-  """``row`` into ``doc``: a rerun with the same key replaces its row; rows sorted for the table."""
+  """``row`` into ``doc`` (the same run already there is replaced by it, other runs kept); rows sorted for the table."""
   doc["rows"] = [r for r in doc["rows"] if _key(r) != _key(row)] + [row]
   doc["rows"].sort(key=lambda r: (r["damage_weight"], r.get("recipe", {}).get("init_log_std") is not None,
-                                  r["seed"], r["env_steps"]))
+                                  r["seed"], r["env_steps"], r.get("date") or ""))
 
 
 def merge(docs: list[dict], stem: str) -> dict:

@@ -110,26 +110,29 @@ def test_rows_say_which_action_scored_them():
   assert "| task reward only | 0 |" in R.render_md(dict(doc, rows=[old])) and "by action" not in R.render_md(dict(doc, rows=[old]))
 
 
-def _row(w, seed, safe):
+def _row(w, seed, safe, date="2026-11-29 05:50:00 UTC"):
   return {"reward": f"w {w}", "damage_weight": w, "seed": seed, "env_steps": 10, "train_wall_s": 1.0,
           "stopped_by_budget": False, "completion": 1.0, "safe_completion": safe, "avg_env_health": 99.0,
-          "episode_cost": 1.0, "eval_episodes": 8, "command": "c", "recipe": {}, "task_settings": {}}
+          "episode_cost": 1.0, "eval_episodes": 8, "command": "c", "recipe": {}, "task_settings": {}, "date": date}
 
 
 def test_merge_combines_the_files_of_separate_processes_into_one_table(tmp_path):
   import json
   paths = []
-  for i, rows in enumerate([[_row(0.0, 0, 0.1)], [_row(2.0, 0, 0.9), _row(2.0, 1, 0.8)], [_row(0.0, 0, 0.2)]]):
+  rerun = _row(0.0, 0, 0.2, date="2026-11-30 07:00:00 UTC")  # the same command run again, later
+  for i, rows in enumerate([[_row(0.0, 0, 0.1)], [_row(2.0, 0, 0.9), _row(2.0, 1, 0.8)], [rerun]]):
     paths.append(str(tmp_path / f"p{i}.json"))
     with open(paths[-1], "w") as f:
       json.dump({"task": "shelve_item", "task_settings": {}, "device": "NVIDIA H200", "recipe": {}, "rows": rows}, f)
   assert R.main(["--merge", *paths, "--out-dir", str(tmp_path)]) == 0
+  assert R.main(["--merge", paths[0], "--out-dir", str(tmp_path)]) == 0  # merging a run again adds nothing
   with open(tmp_path / "rl_brax_shelve_item_nvidia_h200.json") as f:
     merged = json.load(f)
-  # one row per (weight, seed): the later file's rerun of w 0 seed 0 replaces the earlier one
+  # one row per run: the second run of w 0 seed 0 is kept beside the first, in date order
   assert [(r["damage_weight"], r["seed"], r["safe_completion"]) for r in merged["rows"]] == [
-      (0.0, 0, 0.2), (2.0, 0, 0.9), (2.0, 1, 0.8)]
-  assert (tmp_path / "rl_brax_shelve_item_nvidia_h200.md").read_text().count("| w 2.0 |") == 2
+      (0.0, 0, 0.1), (0.0, 0, 0.2), (2.0, 0, 0.9), (2.0, 1, 0.8)]
+  md = (tmp_path / "rl_brax_shelve_item_nvidia_h200.md").read_text()
+  assert md.count("| w 2.0 |") == 2 and "| 2026-11-29 05:50 |" in md and "| 2026-11-30 07:00 |" in md
 
 
 def test_merge_refuses_unreadable_files_and_mixed_tasks(tmp_path):
@@ -173,7 +176,7 @@ EGG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
     (["--init-from", "no/such/file.npz"], "init_from: no checkpoint at"),
     (["--task", "place_plate", "--init-from", EGG, "--init-seed", "4"], "init_from: .* made for task 'pick_egg'"),
     (["--init-from", EGG], "init_seed: .* holds seeds 3,4,5; say which"),
-    (["--init-from", EGG, "--init-seed", "7"], r"init_seed: 7 is not a seed .*\(its seeds: 3,4,5\)"),
+    (["--init-from", EGG, "--init-seed", "7"], r"init_seed: 7 is not a seed .*\(its seeds: 3, 4, 5\)"),
 ])
 def test_bad_init_from_is_refused_naming_it(argv, says):
   with pytest.raises(ValueError, match=says):
