@@ -1,0 +1,249 @@
+"""One task under several trainers in one table: task reward only vs the damage penalty, built from the
+results files the trainers' own scripts wrote (no training; CPU, seconds).
+
+Sources (any number, of one task):
+  * ``rl_multiseed.py`` results (``rl_<task>_<device>[_tag].json`` or a ``--combine``-d file): our trainer,
+    one row per method with its seeds inside; rows of the paper preset (``--methods paper|paper_task_only``)
+    are the third trainer, the paper's PPO settings;
+  * ``rl_brax_ppo.py`` results (``rl_brax_<task>_….json``): Brax's own ``ppo.train`` with MuJoCo Playground's
+    PandaPickCube recipe, one row per run of one seed.
+
+Runs are grouped by (trainer, reward, settings: initial std, start actor, task settings); a group's cells are
+mean (min–max) over its runs, each run scored by ``--action`` of its final evaluation (1024 episodes in every
+committed file), and the group counts the runs that meet the bar of its reward:
+
+  * task reward only: ≤ 20 % safe completion at ≥ 80 % completion (the shortcut is what it learns);
+  * any damage-aware reward: ≥ 80 % safe completion at ≥ 90 % completion.
+
+A second table lists every run with its seed, device, env steps, scores and the command that made it.
+
+Example (Place Plate, the committed H100/H200 files of the three trainers)::
+
+    python benchmarks/trainer_table.py --task place_plate --action mode \\
+        --sources benchmarks/results/rl_place_plate_combined_h100_s16_sample.json \\
+                  benchmarks/results/rl_place_plate_nvidia_h100_80gb_hbm3_paper_fixed.json \\
+                  benchmarks/results/rl_place_plate_nvidia_h100_80gb_hbm3_paper_task_only_fixed.json \\
+                  benchmarks/results/rl_brax_place_plate_nvidia_h100_80gb_hbm3.json \\
+                  benchmarks/results/rl_brax_place_plate_nvidia_h200.json \\
+        --out benchmarks/results/trainer_table_place_plate_mode
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from mjx_damage import io  # noqa: E402
+
+ACTIONS = ("mode", "sample", "mean")
+BRAX = "Brax PPO (Playground PandaPickCube recipe)"
+PAPER = "paper's PPO settings (--preset paper)"
+TASK_ONLY_METHODS = ("task_only", "paper_task_only")
+# (max safe completion, min completion) of task reward only; (min safe completion, min completion) otherwise
+TASK_ONLY_BAR, DAMAGE_BAR = (0.20, 0.80), (0.80, 0.90)
+
+
+def parse(argv=None):
+  p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+  p.add_argument("--task", required=True, help="the task every source file is of")
+  p.add_argument("--sources", nargs="+", required=True, metavar="FILE.json",
+                 help="results files of rl_multiseed.py and/or rl_brax_ppo.py")
+  p.add_argument("--action", default="mode", help=f"score every run by this action ({', '.join(ACTIONS)})")
+  p.add_argument("--out", required=True, help="output stem: writes OUT.md and OUT.json")
+  a = p.parse_args(argv)
+  if a.action not in ACTIONS:
+    p.error(f"--action: one of {', '.join(ACTIONS)}, got {a.action!r}")
+  a.docs = []
+  for path in a.sources:
+    try:
+      with open(path) as f:
+        doc = json.load(f)
+    except (OSError, json.JSONDecodeError) as e:
+      p.error(f"--sources: cannot read {path!r} ({e})")
+    kind = source_kind(doc)
+    if kind is None:
+      p.error(f"--sources: {path!r} is not a results file of rl_multiseed.py or rl_brax_ppo.py")
+    if doc["task"] != a.task:
+      p.error(f"--sources: {path!r} is of task {doc['task']!r}, not --task {a.task!r}")
+    a.docs.append((os.path.basename(path), kind, doc))
+  return a
+
+
+def source_kind(doc) -> str | None:
+  """"brax" (rl_brax_ppo.py), "ours" (rl_multiseed.py), or None."""
+  if not isinstance(doc, dict) or not isinstance(doc.get("rows"), list) or "task" not in doc:
+    return None
+  if "recipe" in doc and all("damage_weight" in r and "seed" in r for r in doc["rows"]):
+    return "brax"
+  if all("per_seed" in r and "train_kwargs" in r for r in doc["rows"]):
+    return "ours"
+  return None
+
+
+def _reward(weight: float, method: str | None = None, label: str | None = None) -> str:
+  if method in TASK_ONLY_METHODS or (method is None and weight == 0):
+    return "task reward only"
+  if method in (None, "penalty", "paper"):
+    return f"damage penalty, w = {weight:g}"
+  if label and ")" in label:  # the multiplier methods name themselves: "PPO-Lagrangian (ĉ=1; λ0=2, lr=0.002)"
+    return label[:label.index(")") + 1]
+  return method
+
+
+def _std(std) -> str:
+  return "" if std is None else f"initial log-std {std[0]:g}/{std[1]:g}"
+
+
+def _settings(*parts) -> str:
+  return "; ".join(p for p in parts if p) or "defaults"
+
+
+def _task_settings(kw: dict | None) -> str:
+  return ", ".join(f"{k}={v}" for k, v in sorted((kw or {}).items()))
+
+
+def _budget(row: dict) -> str:
+  """Brax's --num-timesteps: it sets brax's evaluation interval, so runs of different ones are different runs."""
+  n = row.get("recipe", {}).get("num_timesteps")
+  return "" if n is None else f"--num-timesteps {n / 1e6:g} M"
+
+
+def _scores(by_action: dict | None, head: dict, head_action: str, action: str) -> dict | None:
+  """The run's final evaluation by ``action``: its by-action entry, or the row itself when that is the action."""
+  if by_action and action in by_action:
+    return by_action[action]
+  return head if head_action == action else None
+
+
+def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
+  runs = []
+  for r in doc["rows"]:
+    init = r.get("init_from")
+    actor = f"actor from {os.path.basename(init)} seed {r.get('init_seed')}" if init else ""
+    s = _scores(r.get("by_action"), r, (r.get("eval_actions") or ["mode"])[0], action)
+    runs.append(dict(trainer=BRAX, reward=_reward(r["damage_weight"]), seed=r["seed"], device=doc["device"],
+                     settings=_settings(_std(r.get("recipe", {}).get("init_log_std")), _budget(r), actor,
+                                        _task_settings(r.get("task_settings", doc.get("task_settings")))),
+                     env_steps=r["env_steps"], scores=s, command=r["command"], source=source,
+                     date=r.get("date")))
+  return runs
+
+
+def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
+  runs = []
+  for r in doc["rows"]:
+    kw = r["train_kwargs"]
+    trainer = PAPER if kw.get("preset") == "paper" else f"ours ({kw.get('preset', 'default')} preset)"
+    init = kw.get("init_from")
+    actor = f"actor from {os.path.basename(init)}" + (f" seed {kw['init_seed']}" if "init_seed" in kw else "") if init else ""
+    schedule = ", ".join(x for x in (
+        "cost critic" if kw.get("cost_critic") else "",
+        f"penalty off for the first {kw['damage_warmup_steps'] / 1e6:g} M" if kw.get("damage_warmup_steps") else "",
+        f"w ramped over {kw['damage_ramp_steps'] / 1e6:g} M" if kw.get("damage_ramp_steps") else "",
+        f"critic warm-up {kw['critic_warmup_iterations']} iterations" if kw.get("critic_warmup_iterations") else "",
+        "lr annealed" if kw.get("anneal_learning_rate") else "") if x)
+    head = (r.get("eval_actions") or ["mode"])[0]
+    for p in r["per_seed"]:
+      runs.append(dict(trainer=trainer, reward=_reward(kw.get("damage_weight", 0.0), r["method"], r["label"]),
+                       seed=p["seed"], device=doc["device"].split(" (")[0],
+                       settings=_settings(_std(kw.get("init_log_std")) if trainer != PAPER else "", schedule,
+                                          actor, _task_settings(r.get("task_kwargs"))),
+                       env_steps=r["env_steps_per_seed"],
+                       scores=_scores(p.get("final_eval_by_action"), p["final_eval"], head, action),
+                       command=r["command"], source=source, date=r.get("date")))
+  return runs
+
+
+def meets_bar(run: dict) -> bool:
+  s = run["scores"]
+  if run["reward"] == "task reward only":
+    return s["safe_completion"] <= TASK_ONLY_BAR[0] and s["completion"] >= TASK_ONLY_BAR[1]
+  return s["safe_completion"] >= DAMAGE_BAR[0] and s["completion"] >= DAMAGE_BAR[1]
+
+
+def groups(runs: list[dict]) -> list[dict]:
+  """Runs scored by the action, grouped by (trainer, reward, settings), in the order they first appear."""
+  out: dict[tuple, dict] = {}
+  for run in runs:
+    key = (run["trainer"], run["reward"], run["settings"])
+    g = out.setdefault(key, dict(trainer=key[0], reward=key[1], settings=key[2], runs=[], unscored=0))
+    if run["scores"] is None:
+      g["unscored"] += 1
+    else:
+      g["runs"].append(run)
+  for g in out.values():
+    rs = g["runs"]
+    for m in ("completion", "safe_completion"):
+      v = [r["scores"][m] for r in rs]
+      g[m] = dict(mean=sum(v) / len(v), min=min(v), max=max(v)) if v else None
+    g["meet_bar"] = sum(meets_bar(r) for r in rs)
+    g["seeds"] = sorted({r["seed"] for r in rs})
+    g["devices"] = sorted({r["device"] for r in rs})
+    g["env_steps"] = (min(r["env_steps"] for r in rs), max(r["env_steps"] for r in rs)) if rs else None
+  return list(out.values())
+
+
+def _pct(c: dict | None) -> str:
+  if c is None:
+    return "—"
+  return f"{100 * c['mean']:.1f} ({100 * c['min']:.1f}–{100 * c['max']:.1f})"
+
+
+def _steps(lo_hi) -> str:
+  if lo_hi is None:
+    return "—"
+  lo, hi = lo_hi
+  return f"{lo / 1e6:.1f} M" if lo == hi else f"{lo / 1e6:.1f}–{hi / 1e6:.1f} M"
+
+
+def render_md(doc: dict) -> str:
+  a = doc["action"]
+  lines = [
+      f"# {doc['task']}: task reward only vs the damage penalty, by trainer", "",
+      f"Every run's final policy scored by its **{a}** action. Bars: task reward only ≤ "
+      f"{100 * TASK_ONLY_BAR[0]:.0f} % safe at ≥ {100 * TASK_ONLY_BAR[1]:.0f} % completion; damage-aware ≥ "
+      f"{100 * DAMAGE_BAR[0]:.0f} % safe at ≥ {100 * DAMAGE_BAR[1]:.0f} % completion. Cells: mean (min–max) "
+      "over the group's runs, %. Built by:", "", f"    {doc['command']}", "",
+      "| trainer | reward | settings | runs | seeds | devices | env steps per run | completion | "
+      "safe completion | runs meeting the bar |",
+      "|---|---|---|---|---|---|---|---|---|---|"]
+  for g in doc["groups"]:
+    n = len(g["runs"])
+    extra = f" ({g['unscored']} more not scored by {a})" if g["unscored"] else ""
+    lines.append(f"| {g['trainer']} | {g['reward']} | {g['settings']} | {n}{extra} | "
+                 f"{', '.join(map(str, g['seeds'])) or '—'} | {', '.join(g['devices']) or '—'} | "
+                 f"{_steps(g['env_steps'])} | {_pct(g['completion'])} | {_pct(g['safe_completion'])} | {g['meet_bar']} / {n} |")
+  lines += ["", "Every run:", "",
+            "| trainer | reward | settings | seed | device | env steps | completion | safe completion | source | command |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+  for g in doc["groups"]:
+    for r in g["runs"]:
+      s = r["scores"]
+      lines.append(f"| {r['trainer']} | {r['reward']} | {r['settings']} | {r['seed']} | {r['device']} | "
+                   f"{r['env_steps'] / 1e6:.1f} M | {100 * s['completion']:.1f} % | {100 * s['safe_completion']:.1f} % | "
+                   f"{r['source']} | `{r['command']}` |")
+  return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+  a = parse(argv)
+  runs = []
+  for source, kind, doc in a.docs:
+    runs += (brax_runs if kind == "brax" else ours_runs)(doc, source, a.action)
+  command = "python benchmarks/trainer_table.py " + " ".join(
+      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+  out = dict(task=a.task, action=a.action, command=command, sources=[s for s, _, _ in a.docs], groups=groups(runs))
+  io.write_json(a.out + ".json", out)
+  io.write_text(a.out + ".md", render_md(out))
+  print(f"wrote {a.out}.md / .json ({len(out['groups'])} groups, {len(runs)} runs)")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

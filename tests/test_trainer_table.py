@@ -1,0 +1,109 @@
+"""benchmarks/trainer_table.py: one table of several trainers' results files (no training, no JAX)."""
+
+import importlib.util
+import json
+import os
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_spec = importlib.util.spec_from_file_location("trainer_table", os.path.join(ROOT, "benchmarks", "trainer_table.py"))
+T = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(T)
+
+
+def _eval(compl, safe):
+  return {"completion": compl, "safe_completion": safe, "avg_env_health": 90.0, "episode_cost": 1.0}
+
+
+def _ours_row(method, preset, w, per_seed, label=None, **train_kwargs):
+  """per_seed: [(seed, mode (compl, safe), sample (compl, safe))]."""
+  return {"label": label or method, "method": method, "command": f"rl_multiseed {method}",
+          "train_kwargs": {"preset": preset, "damage_weight": w, **train_kwargs}, "task_kwargs": {"obs_mode": "paper"},
+          "eval_actions": ["sample", "mode"], "env_steps_per_seed": 1_000_000,
+          "per_seed": [{"seed": s, "final_eval": _eval(*sa),
+                        "final_eval_by_action": {"sample": _eval(*sa), "mode": _eval(*mo)}} for s, mo, sa in per_seed]}
+
+
+def _brax_row(w, seed, mode, sample=None):
+  row = {"damage_weight": w, "seed": seed, "env_steps": 2_000_000, "command": f"rl_brax_ppo w{w} s{seed}",
+         "recipe": {}, "task_settings": {"obs_mode": "paper"}, **_eval(*mode)}
+  if sample is not None:
+    row.update(eval_actions=["mode", "sample"], by_action={"mode": _eval(*mode), "sample": _eval(*sample)})
+  return row
+
+
+@pytest.fixture
+def sources(tmp_path):
+  ours = {"device": "NVIDIA H100 80GB HBM3 (gpu, 1 device(s))", "task": "place_plate", "eval_episodes": 1024,
+          "rows": [_ours_row("task_only", "playground", 0.0, [(0, (0.9, 0.0), (0.85, 0.01)), (1, (0.7, 0.0), (0.9, 0.0))]),
+                   _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.95), (1.0, 0.9)), (1, (1.0, 0.5), (1.0, 0.85))]),
+                   _ours_row("pid", "playground", None, [(0, (1.0, 0.9), (1.0, 0.9))],
+                             label="PID-Lagrangian (ĉ=1; λ0=2, K=0.01) + cost critic", cost_critic=True),
+                   _ours_row("paper", "paper", 2.0, [(0, (0.1, 0.0), (0.1, 0.0))])]}
+  brax = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+          "rows": [_brax_row(0.0, 0, (1.0, 0.3)), _brax_row(2.0, 0, (1.0, 0.99), (1.0, 0.98)),
+                   _brax_row(2.0, 1, (0.95, 0.85))]}
+  paths = []
+  for name, doc in (("ours.json", ours), ("brax.json", brax)):
+    paths.append(str(tmp_path / name))
+    with open(paths[-1], "w") as f:
+      json.dump(doc, f)
+  return paths
+
+
+def test_groups_score_each_run_by_the_action_and_count_the_bar(sources, tmp_path):
+  out = str(tmp_path / "table")
+  assert T.main(["--task", "place_plate", "--action", "mode", "--sources", *sources, "--out", out]) == 0
+  with open(out + ".json") as f:
+    doc = json.load(f)
+  g = {(x["trainer"], x["reward"]): x for x in doc["groups"]}
+  ours = "ours (playground preset)"
+  # task reward only, by the mode: seed 1 completes 70 % (< 80 %), so one of two runs meets the bar
+  assert g[(ours, "task reward only")]["meet_bar"] == 1
+  assert g[(ours, "task reward only")]["completion"] == pytest.approx(dict(mean=0.8, min=0.7, max=0.9))
+  assert g[(ours, "damage penalty, w = 2")]["safe_completion"] == pytest.approx(dict(mean=0.725, min=0.5, max=0.95))
+  assert g[(ours, "damage penalty, w = 2")]["meet_bar"] == 1
+  assert (ours, "PID-Lagrangian (ĉ=1; λ0=2, K=0.01)") in g
+  assert g[(T.PAPER, "damage penalty, w = 2")]["meet_bar"] == 0
+  # Brax: task only at 30 % safe misses the bar; both w = 2 runs meet it (seed 1: 85 % safe at 95 % completion)
+  assert g[(T.BRAX, "task reward only")]["meet_bar"] == 0
+  assert g[(T.BRAX, "damage penalty, w = 2")]["meet_bar"] == 2
+  assert "cost critic" in g[(ours, "PID-Lagrangian (ĉ=1; λ0=2, K=0.01)")]["settings"]
+  md = open(out + ".md").read()
+  assert "| 1 / 2 |" in md and "`rl_brax_ppo w2.0 s1`" in md and "python benchmarks/trainer_table.py" in md
+
+
+def test_a_run_not_scored_by_the_action_is_counted_apart_not_guessed(sources, tmp_path):
+  out = str(tmp_path / "table")
+  T.main(["--task", "place_plate", "--action", "sample", "--sources", *sources, "--out", out])
+  with open(out + ".json") as f:
+    g = {(x["trainer"], x["reward"]): x for x in json.load(f)["groups"]}
+  w2 = g[(T.BRAX, "damage penalty, w = 2")]
+  assert len(w2["runs"]) == 1 and w2["unscored"] == 1  # seed 1 was scored by the mode only
+  assert w2["safe_completion"]["mean"] == pytest.approx(0.98)
+  assert g[("ours (playground preset)", "damage penalty, w = 2")]["meet_bar"] == 2  # sampled: 90 and 85 % safe
+  assert "(1 more not scored by sample)" in open(out + ".md").read()
+
+
+@pytest.mark.parametrize("doc, says", [
+    ({"task": "place_plate", "rows": [{"x": 1}]}, "not a results file of rl_multiseed.py or rl_brax_ppo.py"),
+    ({"task": "pick_egg", "recipe": {}, "rows": []}, "is of task 'pick_egg', not --task 'place_plate'"),
+    ("not json", "cannot read"),
+])
+def test_bad_sources_are_refused_naming_the_flag(tmp_path, capsys, doc, says):
+  path = tmp_path / "bad.json"
+  path.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+  with pytest.raises(SystemExit):
+    T.parse(["--task", "place_plate", "--sources", str(path), "--out", str(tmp_path / "t")])
+  err = capsys.readouterr().err
+  assert "--sources:" in err and says in err
+
+
+def test_unknown_action_and_missing_file_are_refused(tmp_path, capsys, sources):
+  with pytest.raises(SystemExit):
+    T.parse(["--task", "place_plate", "--sources", *sources, "--action", "greedy", "--out", "t"])
+  assert "--action: one of mode, sample, mean, got 'greedy'" in capsys.readouterr().err
+  with pytest.raises(SystemExit):
+    T.parse(["--task", "place_plate", "--sources", str(tmp_path / "missing.json"), "--out", "t"])
+  assert "--sources: cannot read" in capsys.readouterr().err
