@@ -267,12 +267,13 @@ def test_heat_source_contact_sensors_match_mjx_touching():
   assert layout.num_sources == 1
   ms = spec.compile()
   mx = mjx.put_model(m)
+  # compiled once (op by op, MJX's forward dispatches for tens of seconds)
+  mjx_touching = jax.jit(lambda q: T.touching(b.thermal, b, mjx.forward(mx, mjx.make_data(mx).replace(qpos=q))))
   for qpos, want in (([0.0, -0.181], [[1.0], [0.0], [0.0]]), ([0.8, 0.1], [[0.0], [0.0], [0.0]])):
     d = mujoco.MjData(ms)
     d.qpos[:] = qpos
     mujoco.mj_forward(ms, d)
-    dx = mjx.forward(mx, mjx.make_data(mx).replace(qpos=jnp.asarray(qpos, jnp.float32)))
-    np.testing.assert_array_equal(np.asarray(T.touching(b.thermal, b, dx)), want)
+    np.testing.assert_array_equal(np.asarray(mjx_touching(jnp.asarray(qpos, jnp.float32))), want)
     np.testing.assert_array_equal(np.asarray(sensors.touching(layout, d.sensordata)), want)
 
 

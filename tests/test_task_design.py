@@ -166,9 +166,14 @@ def test_shelve_item_distance_knob():
   rewards = {}
   for distance in ("euclidean", "axes"):
     task = tasks.make("shelve_item", distance=distance).unwrapped
-    s = task.reset(rng)
-    err = np.asarray(task.pos(s.pipeline_state, "cereal_box") - s.info["slot"])
-    rewards[distance] = (float(task.evaluate(s.pipeline_state, s.info)[0]), err)
+
+    @jax.jit  # one compiled program: op by op, the reset's kinematics dispatch for tens of seconds
+    def first(rng):
+      s = task.reset(rng)
+      return task.evaluate(s.pipeline_state, s.info)[0], task.pos(s.pipeline_state, "cereal_box") - s.info["slot"]
+
+    r, err = first(rng)
+    rewards[distance] = (float(r), np.asarray(err))
   r, err = rewards["euclidean"]
   assert r == pytest.approx(-2.0 * np.linalg.norm(err), rel=1e-5)
   r, err = rewards["axes"]
@@ -225,9 +230,10 @@ def test_pick_egg_start_knob():
       tasks.make("pick_egg", start=bad)
   assert tasks.default_config("pick_egg")["start"] == "counter"
   rng = jax.random.PRNGKey(3)
-  counter = tasks.make("pick_egg", goal="carry").reset(rng).pipeline_state
+  # resets compiled, not op by op (tens of seconds of dispatch)
+  counter = jax.jit(tasks.make("pick_egg", goal="carry").reset)(rng).pipeline_state
   pre_env = tasks.make("pick_egg", **PICK_EGG_PREGRASP)
-  pre, task = pre_env.reset(rng).pipeline_state, pre_env.unwrapped
+  pre, task = jax.jit(pre_env.reset)(rng).pipeline_state, pre_env.unwrapped
   egg = np.asarray(task.egg_pos(pre))
   np.testing.assert_allclose(egg, np.asarray(task.egg_pos(counter)), atol=1e-6)  # same egg, same goal draws
   np.testing.assert_allclose(np.asarray(task.robot.eef_pos(pre)), [egg[0], egg[1], P.GRASP_Z], atol=2e-3)
@@ -261,8 +267,11 @@ def test_pick_egg_held_reward_pays_only_a_held_egg():
   envs = {cr: tasks.make("pick_egg", **{**PICK_EGG_HELD, "carry_reward": cr}) for cr in P.CARRY_REWARDS}
   rng = jax.random.PRNGKey(2)
   task = envs["held"].unwrapped
-  s = envs["held"].reset(rng)
+  s = jax.jit(envs["held"].reset)(rng)
   d, info = s.pipeline_state, s.info
+  # each reward's evaluate compiled once (op by op, its kinematics dispatch for tens of seconds)
+  evaluate = {cr: jax.jit(lambda qpos, task=envs[cr].unwrapped: task.evaluate(d.replace(qpos=qpos), info)[0])
+              for cr in P.CARRY_REWARDS}
   egg0, goal = np.asarray(task.egg_pos(d)), np.asarray(info["goal"])
   assert float(info["rest_distance"]) == pytest.approx(np.linalg.norm(egg0 - goal), abs=1e-5)
   q_half = lambda gap: gap / 2 + R.FINGER_HALF_THICK  # the gripper's finger joint for an inner gap
@@ -271,7 +280,7 @@ def test_pick_egg_held_reward_pays_only_a_held_egg():
     egg = np.asarray(egg, np.float32)
     hand = egg + [0, 0, P.GRASP_Z - P.EGG_R] if hand is None else np.asarray(hand, np.float32)
     qpos = d.qpos.at[task._q : task._q + 3].set(egg).at[0:3].set(hand).at[3:5].set(q_half(gap))
-    return float(envs[carry_reward].unwrapped.evaluate(d.replace(qpos=qpos), info)[0])
+    return float(evaluate[carry_reward](qpos))
 
   toward = (goal - egg0) * [1, 1, 0] / np.linalg.norm((goal - egg0)[:2])
   pushed, lifted = egg0 + 0.1 * toward, egg0 + [0, 0, 0.05]

@@ -75,11 +75,12 @@ def test_contact_forces_of_a_sliding_box_match_the_jax_implementation():
   qpos = jnp.tile(jnp.asarray(model.qpos0, jnp.float32), (2, 1))
   qvel = jnp.zeros((2, model.nv), jnp.float32).at[:, 0].set(jnp.array([0.5, 1.0]))
   mj = mjx.put_model(model)
-  dj = jax.vmap(lambda q, v: mjx.forward(mj, mjx.make_data(mj).replace(qpos=q, qvel=v)))(qpos, qvel)
-  fj, lj = jax.vmap(lambda d: mjx_jax.applied_forces(binding, mj, d))(dj)
+  # compiled (op by op, MJX-JAX's forward dispatches for tens of seconds)
+  fj, lj = jax.jit(jax.vmap(lambda q, v: mjx_jax.applied_forces(
+      binding, mj, mjx.forward(mj, mjx.make_data(mj).replace(qpos=q, qvel=v)))))(qpos, qvel)
   mw = warp_model(model)
-  dw = jax.vmap(lambda d: mjx.step(mw, d))(warp_data(model, qpos, qvel))
-  fw, lw, over = mjx_warp.contact_forces(binding, mw, dw, slots=8)
+  fw, lw, over = jax.jit(lambda d: mjx_warp.contact_forces(binding, mw, jax.vmap(lambda x: mjx.step(mw, x))(d), slots=8))(
+      warp_data(model, qpos, qvel))
   net = lambda f, link: np.asarray(jnp.sum(jnp.where((link == 0)[..., None], f, 0.0), axis=1))  # on the box
   nj, nw = net(fj, lj), net(fw, lw)
   assert (nj[:, 2] > 2 * 9.81).all() and (nj[:, 0] < 0).all()  # pushed up, and back against the motion
