@@ -20,6 +20,15 @@ run builds one table; ``--merge A.json B.json ...`` (no training) combines the f
 separate processes, e.g. several runs sharing one GPU. ``--budget-seconds`` stops a run at the first evaluation
 after that much training wall time (the policy of that evaluation is scored).
 
+``--curve-episodes N`` (default 256; 0: off): at each of brax's evaluations the current policy is also scored
+by our evaluator (the first ``--eval-actions`` action, N episodes, DAMAGE_MODEL.md §7), so a row has the
+completion and safe completion of every evaluation (``scored_curve``) and the time to 80 % safe, as our
+trainer's periodic evaluations give it (``rl_multiseed.py``: the first evaluation with ≥ 80 % safe and ≥ 80 %
+completion, s of training, compile included). brax's own evaluation reports only its reward and per-step
+success. A point's ``wall_s`` is the clock when brax hands over those weights (after the training epoch, before
+brax's own evaluation of them). The seconds these scorings take are kept off the run's clock (``train_wall_s``,
+the curve's ``wall_s``, ``--budget-seconds``), as brax's stock training does not spend them.
+
 GPU (one H100, ≤ 10 min per call; earlier runs of this recipe needed 15–23 M
 env-steps, ≈ 50 k env-steps/s alone on the GPU, plus ≈ 65 s compile)::
 
@@ -76,7 +85,8 @@ from train import checkpoint as ckpt  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.policy import load_policy  # noqa: E402
 from train.ppo import init_source  # noqa: E402
-from train.evaluate import evaluate, parametrized_policy  # noqa: E402
+from train.evaluate import episode_keys, evaluate, make_evaluator, parametrized_policy  # noqa: E402
+from train.evaluate import metrics as eval_metrics  # noqa: E402
 from train.networks import POLICY_ACTIONS, init_policy, policy_apply  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
@@ -90,6 +100,8 @@ PLAYGROUND_PANDA_PICK_CUBE = {
 }
 POLICY_LAYERS, VALUE_LAYERS = (32,) * 4, (256,) * 5
 EVAL_SEED = 12345
+CURVE_SEED = 54321  # the per-evaluation scoring's episodes: not the final evaluation's
+SAFE_BAR = (0.8, 0.8)  # time to 80 % safe: safe completion ≥ 0.8 and completion ≥ 0.8, as rl_multiseed.time_to_safe
 
 
 class _Budget(Exception):
@@ -159,9 +171,17 @@ def policy_path(stem: str, weight: float, seed: int) -> str:
   return f"{stem}_w{weight:g}_s{seed}_policy.npz"
 
 
+def time_to_safe(points: list[dict]) -> float | None:
+  """``wall_s`` of the first scored evaluation with safe completion and completion at the bars (SAFE_BAR)."""
+  for p in points:
+    if p["safe_completion"] >= SAFE_BAR[0] and p["completion"] >= SAFE_BAR[1]:
+      return p["wall_s"]
+  return None
+
+
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
               settings: dict | None = None, actions=("mode",), init: tuple[str, int] | None = None,
-              export: str | None = None) -> dict:
+              export: str | None = None, curve_episodes: int = 0) -> dict:
   """One brax PPO run, then the 1024-episode evaluation of its final policy; a result row.
 
   ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
@@ -170,15 +190,21 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   ``init``: (checkpoint file, seed): brax starts from that actor and observation normaliser of our trainer
   (the same brax networks, :func:`check_init`), with its own fresh value function (``restore_value_fn=False``).
   ``export``: also write the final policy there (:func:`export_policy`), before it is scored.
+  ``curve_episodes``: > 0: score the policy of each of brax's evaluations on that many episodes by the first
+  action (``scored_curve``, ``time_to_80_safe_s``); their seconds are kept off the run's clock.
   """
   settings = dict(RL_SETTINGS.get(task, {}) if settings is None else settings)
   env = tasks.make(task, damage_weight=weight, **settings)
   episode_length = env.unwrapped.episode_length
-  curve, last = [], {}
+  curve, last, scored = [], {}, []
+  scoring = {"seconds": 0.0, "evaluator": None}  # per-evaluation scoring: off the run's clock
   t_start = time.time()
 
+  def clock():
+    return time.time() - t_start - scoring["seconds"]
+
   def progress(step, metrics):
-    curve.append({"env_steps": int(step), "wall_s": round(time.time() - t_start, 1),
+    curve.append({"env_steps": int(step), "wall_s": round(clock(), 1),
                   "eval_episode_reward": float(metrics.get("eval/episode_reward", np.nan)),
                   "eval_success": float(metrics.get("eval/episode_success", np.nan))})
     print(f"  w={weight:g} seed={seed}: {step} env-steps, {curve[-1]['wall_s']} s, "
@@ -186,7 +212,17 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
 
   def keep_params(step, make_policy, params):
     last.update(step=int(step), make_policy=make_policy, params=params)
-    if budget_s is not None and step > 0 and time.time() - t_start > budget_s:
+    if curve_episodes:
+      t0, at = time.time(), round(clock(), 1)
+      if scoring["evaluator"] is None:  # one compile; each evaluation's weights are data
+        scoring["evaluator"] = make_evaluator(
+            env, parametrized_policy(policy_apply(make_policy, action=actions[0]), None), episode_length)
+      m = eval_metrics(scoring["evaluator"].run(episode_keys(CURVE_SEED, curve_episodes), 1.0, params=params),
+                       env.entity_names)
+      scored.append({"env_steps": int(step), "wall_s": at, "completion": m["completion"],
+                     "safe_completion": m["safe_completion"], "episode_cost": m["cost_mean"]})
+      scoring["seconds"] += time.time() - t0
+    if budget_s is not None and step > 0 and clock() > budget_s:
       raise _Budget
 
   restore = {}
@@ -207,7 +243,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         progress_fn=progress, policy_params_fn=keep_params, **restore)
   except _Budget:
     stopped_early = True
-  train_s = time.time() - t_start
+  train_s = clock()
 
   make_policy = last["make_policy"]
   if export is not None:
@@ -226,6 +262,10 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
       "episode_cost": m["cost_mean"], "task_return": m.get("task_return"), "eval_episodes": m["episodes"],
       "env_steps": last["step"], "train_wall_s": round(train_s, 1), "eval_wall_s": round(time.time() - t0, 1),
       "stopped_by_budget": stopped_early, "curve": curve, "eval_actions": list(actions),
+      **({} if not curve_episodes else {
+          "scored_curve": {"episodes": curve_episodes, "seed": CURVE_SEED, "action": actions[0], "points": scored,
+                           "seconds": round(scoring["seconds"], 1)},
+          "time_to_80_safe_s": time_to_safe(scored)}),
       **({} if init is None else {"init_from": os.path.basename(init[0]), "init_seed": init[1]}),
       **({} if export is None else {"policy_file": os.path.basename(export)}),
       "by_action": {a: {"completion": v["completion"], "safe_completion": v["safe_completion"],
@@ -292,6 +332,17 @@ def _key(row: dict):
           row.get("init_from"), row.get("init_seed"), row.get("date"))
 
 
+def _t80_label(row: dict) -> str:
+  """Time to 80 % safe of a row: seconds, 'not reached' over its scored evaluations, or 'not scored' (rows
+  run without --curve-episodes)."""
+  c = row.get("scored_curve")
+  if c is None:
+    return "not scored"
+  t = row["time_to_80_safe_s"]
+  at = next((p["env_steps"] for p in c["points"] if p["wall_s"] == t), None) if t is not None else None
+  return f"not reached ({len(c['points'])} evaluations)" if t is None else f"{t:.0f} ({at / 1e6:.1f} M)"
+
+
 def render_md(doc: dict) -> str:
   lines = [
       f"# Brax PPO (brax.training.agents.ppo.train) on {doc['task']}: task-only vs damage penalty",
@@ -301,18 +352,21 @@ def render_md(doc: dict) -> str:
       f"policy MLP {'×'.join(map(str, POLICY_LAYERS[:1]))}×{len(POLICY_LAYERS)}, value MLP "
       f"{VALUE_LAYERS[0]}×{len(VALUE_LAYERS)}), episode length = the task's. Task settings: "
       f"{doc['task_settings'] or 'defaults'}. Each final policy (its mode, brax's deterministic policy, unless "
-      f"the row names the action) scored by `train.evaluate.evaluate` on the row's eval episodes (seed {EVAL_SEED}).",
+      f"the row names the action) scored by `train.evaluate.evaluate` on the row's eval episodes (seed {EVAL_SEED}). "
+      f"Time to 80 % safe: s of training (compile incl.) at brax's first evaluation whose policy, scored by our "
+      f"evaluator (`--curve-episodes`, the first action, seed {CURVE_SEED}; those seconds kept off the clock), "
+      f"has ≥ 80 % safe and ≥ 80 % completion, env steps in brackets.",
       "",
       "| reward | seed | env-steps | train wall s (incl. compile) | completion | safe completion | avg env health "
-      "| episode cost | eval episodes | run (UTC) | command |",
-      "|---|---|---|---|---|---|---|---|---|---|---|",
+      "| episode cost | eval episodes | time to 80 % safe (s) | run (UTC) | command |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|",
   ]
   for r in doc["rows"]:
     lines.append(
         f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)}{_action_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
-        f"| {r['eval_episodes']} | {_run_label(r)} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
+        f"| {r['eval_episodes']} | {_t80_label(r)} | {_run_label(r)} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
   several = [r for r in doc["rows"] if len(r.get("eval_actions", ())) > 1]
   if several:
     lines += ["", "Final policy by action (the same weights; mode = brax's deterministic policy, sample = one draw "
@@ -357,6 +411,9 @@ def parse_args(argv=None):
   p.add_argument("--num-eval-envs", type=int, default=pc["num_eval_envs"])
   p.add_argument("--num-resets-per-eval", type=int, default=pc["num_resets_per_eval"])
   p.add_argument("--eval-episodes", type=int, default=1024)
+  p.add_argument("--curve-episodes", type=int, default=256,
+                 help="episodes scoring the policy at each of brax's evaluations (completion, safe completion, "
+                      "time to 80 %% safe; their seconds are kept off the run's clock); 0: off")
   p.add_argument("--eval-actions", default="mode",
                  help="comma-separated actions of the final evaluation: mode (brax's deterministic policy), sample "
                       "(the stochastic policy PPO trains), mean (E[tanh(u)] from 32 draws); the first gives the "
@@ -401,6 +458,8 @@ def parse_args(argv=None):
                "num_eval_envs", "eval_episodes"):
     if getattr(a, name) < 1:
       raise ValueError(f"{name}: must be >= 1, got {getattr(a, name)}")
+  if a.curve_episodes < 0:
+    raise ValueError(f"curve_episodes: must be >= 0 (0: off), got {a.curve_episodes}")
   if a.num_resets_per_eval < 0:
     raise ValueError(f"num_resets_per_eval: must be >= 0, got {a.num_resets_per_eval}")
   if (a.batch_size * a.num_minibatches) % a.num_envs:
@@ -492,11 +551,12 @@ def main(argv=None) -> int:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
       row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init,
-                      export=policy_path(stem, w, s) if a.export_policy else None)
+                      export=policy_path(stem, w, s) if a.export_policy else None, curve_episodes=a.curve_episodes)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"])
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "
-            f"{row['env_steps']} env-steps, {row['train_wall_s']} s", flush=True)
+            f"{row['env_steps']} env-steps, {row['train_wall_s']} s, time to 80 % safe "
+            f"{_t80_label(row)}", flush=True)
       _add_row(doc, row)
       write_json(stem + ".json", doc)  # after every run: a timeout keeps the finished ones
       write_text(stem + ".md", render_md(doc))

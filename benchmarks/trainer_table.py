@@ -15,6 +15,12 @@ committed file), and the group counts the runs that meet the bar of its reward:
   * task reward only: ≤ 20 % safe completion at ≥ 80 % completion (the shortcut is what it learns);
   * any damage-aware reward: ≥ 80 % safe completion at ≥ 90 % completion.
 
+Time to 80 % safe: seconds of training (compile included) to the run's first periodic evaluation by the mode
+with ≥ 80 % safe and ≥ 80 % completion, as each trainer's file gives it (ours: its periodic evaluations;
+Brax: rows run with ``rl_brax_ppo.py --curve-episodes``, our evaluator at each of brax's evaluations; earlier
+Brax rows and rows scored by another action count as not scored). Times are comparable only between runs on
+one kind of device, each alone on it; our trainer's seeds of one call train in one program and share its clock.
+
 A second table lists every run with its seed, device, env steps, scores and the command that made it.
 
 Example (Place Plate, the committed H100/H200 files of the three trainers)::
@@ -131,7 +137,8 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
                      settings=_settings(_std(r.get("recipe", {}).get("init_log_std")), _budget(r), actor,
                                         _task_settings(r.get("task_settings", doc.get("task_settings")))),
                      env_steps=r["env_steps"], scores=s, command=r["command"], source=source,
-                     date=r.get("date")))
+                     date=r.get("date"), t80=r.get("time_to_80_safe_s"),
+                     t80_scored=(r.get("scored_curve") or {}).get("action") == "mode"))
   return runs
 
 
@@ -156,7 +163,8 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
                                           actor, _task_settings(r.get("task_kwargs"))),
                        env_steps=r["env_steps_per_seed"],
                        scores=_scores(p.get("final_eval_by_action"), p["final_eval"], head, action),
-                       command=r["command"], source=source, date=r.get("date")))
+                       command=r["command"], source=source, date=r.get("date"),
+                       t80=p.get("time_to_80_safe_s"), t80_scored="time_to_80_safe_s" in p))
   return runs
 
 
@@ -186,6 +194,10 @@ def groups(runs: list[dict]) -> list[dict]:
     g["seeds"] = sorted({r["seed"] for r in rs})
     g["devices"] = sorted({r["device"] for r in rs})
     g["env_steps"] = (min(r["env_steps"] for r in rs), max(r["env_steps"] for r in rs)) if rs else None
+    timed = [r for r in rs if r["t80_scored"]]
+    t = [r["t80"] for r in timed if r["t80"] is not None]
+    g["time_to_80_safe"] = dict(scored=len(timed), reached=len(t), mean=sum(t) / len(t) if t else None,
+                                min=min(t, default=None), max=max(t, default=None))
   return list(out.values())
 
 
@@ -202,6 +214,23 @@ def _steps(lo_hi) -> str:
   return f"{lo / 1e6:.1f} M" if lo == hi else f"{lo / 1e6:.1f}–{hi / 1e6:.1f} M"
 
 
+def _t80(t: dict, runs: int) -> str:
+  """A group's time to 80 % safe: 'mean (min–max) s, k / n reached' over its timed runs."""
+  if not t["scored"]:
+    return "not scored"
+  rest = f" ({runs - t['scored']} not scored)" if runs > t["scored"] else ""
+  if not t["reached"]:
+    return f"none of {t['scored']} reached{rest}"
+  span = f"{t['mean']:.0f}" if t["min"] == t["max"] else f"{t['mean']:.0f} ({t['min']:.0f}–{t['max']:.0f})"
+  return f"{span}, {t['reached']} / {t['scored']} reached{rest}"
+
+
+def _run_t80(r: dict) -> str:
+  if not r["t80_scored"]:
+    return "not scored"
+  return "not reached" if r["t80"] is None else f"{r['t80']:.0f}"
+
+
 def render_md(doc: dict) -> str:
   a = doc["action"]
   lines = [
@@ -209,25 +238,29 @@ def render_md(doc: dict) -> str:
       f"Every run's final policy scored by its **{a}** action. Bars: task reward only ≤ "
       f"{100 * TASK_ONLY_BAR[0]:.0f} % safe at ≥ {100 * TASK_ONLY_BAR[1]:.0f} % completion; damage-aware ≥ "
       f"{100 * DAMAGE_BAR[0]:.0f} % safe at ≥ {100 * DAMAGE_BAR[1]:.0f} % completion. Cells: mean (min–max) "
-      "over the group's runs, %. Built by:", "", f"    {doc['command']}", "",
+      "over the group's runs, %. Time to 80 % safe: s of training (compile incl.) to the first periodic "
+      "evaluation by the mode with ≥ 80 % safe and ≥ 80 % completion (comparable only on one kind of device, "
+      "each run alone on it; our trainer's seeds of one call train in one program and share its clock). Built by:", "", f"    {doc['command']}", "",
       "| trainer | reward | settings | runs | seeds | devices | env steps per run | completion | "
-      "safe completion | runs meeting the bar |",
-      "|---|---|---|---|---|---|---|---|---|---|"]
+      "safe completion | runs meeting the bar | time to 80 % safe (s) |",
+      "|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in doc["groups"]:
     n = len(g["runs"])
     extra = f" ({g['unscored']} more not scored by {a})" if g["unscored"] else ""
     lines.append(f"| {g['trainer']} | {g['reward']} | {g['settings']} | {n}{extra} | "
                  f"{', '.join(map(str, g['seeds'])) or '—'} | {', '.join(g['devices']) or '—'} | "
-                 f"{_steps(g['env_steps'])} | {_pct(g['completion'])} | {_pct(g['safe_completion'])} | {g['meet_bar']} / {n} |")
+                 f"{_steps(g['env_steps'])} | {_pct(g['completion'])} | {_pct(g['safe_completion'])} | {g['meet_bar']} / {n} "
+                 f"| {_t80(g['time_to_80_safe'], n)} |")
   lines += ["", "Every run:", "",
-            "| trainer | reward | settings | seed | device | env steps | completion | safe completion | source | command |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
+            "| trainer | reward | settings | seed | device | env steps | completion | safe completion "
+            "| time to 80 % safe (s) | source | command |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in doc["groups"]:
     for r in g["runs"]:
       s = r["scores"]
       lines.append(f"| {r['trainer']} | {r['reward']} | {r['settings']} | {r['seed']} | {r['device']} | "
                    f"{r['env_steps'] / 1e6:.1f} M | {100 * s['completion']:.1f} % | {100 * s['safe_completion']:.1f} % | "
-                   f"{r['source']} | `{r['command']}` |")
+                   f"{_run_t80(r)} | {r['source']} | `{r['command']}` |")
   return "\n".join(lines) + "\n"
 
 

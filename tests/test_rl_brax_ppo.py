@@ -259,3 +259,55 @@ def test_export_policy_never_replaces_an_earlier_runs_weights(tmp_path):
   with open(earlier, "rb") as f:
     assert f.read() == b"weights of an earlier run"
   assert not os.path.exists(stem + ".json")  # refused before any run
+
+
+def test_each_evaluation_is_scored_off_the_clock_and_gives_the_time_to_80_safe(monkeypatch):
+  """--curve-episodes: the policy of every brax evaluation is scored by our evaluator (built once, the weights
+  as data); the scorings' seconds count neither in the run's clock nor against --budget-seconds."""
+  import time
+
+  scores = iter([(0.5, 0.0), (0.9, 0.7), (0.95, 0.85), (1.0, 1.0)])  # (completion, safe) of each evaluation
+  built, runs = [], []
+
+  class Scorer:
+    def run(self, keys, fragility, params=None):
+      runs.append((len(keys), params))
+      time.sleep(0.4)  # a scoring slower than the budget: it must not stop the run
+      return next(scores)
+
+  def fake_make_evaluator(env, policy, episode_length):
+    built.append(policy)
+    return Scorer()
+
+  def fake_train(progress_fn, policy_params_fn, **kw):
+    for step in (0, 100, 200, 300):
+      policy_params_fn(step, lambda *a, **k: None, f"weights at {step}")
+      progress_fn(step, {"eval/episode_reward": 1.0})
+
+  final = {"completion": 1.0, "safe_completion": 1.0, "avg_health": 100.0, "cost_mean": 0.0, "episodes": 8}
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  monkeypatch.setattr(R, "make_evaluator", fake_make_evaluator)
+  monkeypatch.setattr(R, "eval_metrics", lambda per_ep, names: {"completion": per_ep[0], "safe_completion": per_ep[1],
+                                                                 "cost_mean": 0.0})
+  monkeypatch.setattr(R, "evaluate", lambda *a, **k: {"metrics": final})
+  cfg = dict(R.PLAYGROUND_PANDA_PICK_CUBE, eval_episodes=8)
+  row = R.train_one("place_plate", 2.0, 0, cfg, 0.3, {}, curve_episodes=16)
+  assert len(built) == 1 and [r[0] for r in runs] == [16] * 4
+  assert [r[1] for r in runs] == [f"weights at {s}" for s in (0, 100, 200, 300)]
+  c = row["scored_curve"]
+  assert c["episodes"] == 16 and c["action"] == "mode" and c["seconds"] >= 1.6
+  assert [(p["env_steps"], p["completion"], p["safe_completion"]) for p in c["points"]] == [
+      (0, 0.5, 0.0), (100, 0.9, 0.7), (200, 0.95, 0.85), (300, 1.0, 1.0)]
+  assert not row["stopped_by_budget"] and row["train_wall_s"] < 0.3 and row["curve"][-1]["wall_s"] < 0.3
+  assert row["time_to_80_safe_s"] == c["points"][2]["wall_s"]  # the first with safe and completion >= 0.8
+  doc = {"task": "place_plate", "task_settings": {}, "device": "cpu", "recipe": {},
+         "rows": [dict(row, command="c", date="2026-11-29 10:00:00 UTC")]}
+  assert f"| {row['time_to_80_safe_s']:.0f} (0.0 M) |" in R.render_md(doc)
+  never = dict(row, time_to_80_safe_s=None)
+  assert "| not reached (4 evaluations) |" in R.render_md(dict(doc, rows=[dict(never, command="c")]))
+  earlier = {k: v for k, v in row.items() if k not in ("scored_curve", "time_to_80_safe_s")}
+  assert "| not scored |" in R.render_md(dict(doc, rows=[dict(earlier, command="c")]))
+
+  assert "scored_curve" not in R.train_one("place_plate", 2.0, 0, cfg, None, {})  # off unless asked
+  with pytest.raises(ValueError, match="curve_episodes"):
+    R.parse_args(["--curve-episodes", "-1"])

@@ -107,3 +107,33 @@ def test_unknown_action_and_missing_file_are_refused(tmp_path, capsys, sources):
   with pytest.raises(SystemExit):
     T.parse(["--task", "place_plate", "--sources", str(tmp_path / "missing.json"), "--out", "t"])
   assert "--sources: cannot read" in capsys.readouterr().err
+
+
+def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
+  """Ours: each seed's time from its periodic evaluations (None: never reached); Brax: only rows with a
+  scored curve by the mode (rl_brax_ppo.py --curve-episodes) are timed, earlier rows count as not scored."""
+  row = _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.95), (1.0, 0.9)), (1, (1.0, 0.5), (1.0, 0.85)),
+                                                 (2, (1.0, 0.9), (1.0, 0.9))])
+  for p, t in zip(row["per_seed"], (120.0, None, 180.0)):
+    p["time_to_80_safe_s"] = t
+  timed = dict(_brax_row(2.0, 0, (1.0, 0.99)), time_to_80_safe_s=200.0,
+               scored_curve={"action": "mode", "episodes": 256, "points": []})
+  by_sample = dict(_brax_row(2.0, 1, (1.0, 0.99)), time_to_80_safe_s=90.0,
+                   scored_curve={"action": "sample", "episodes": 256, "points": []})
+  docs = {"ours.json": {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "rows": [row]},
+          "brax.json": {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+                        "rows": [timed, by_sample, _brax_row(2.0, 2, (1.0, 0.9))]}}
+  paths = []
+  for name, doc in docs.items():
+    paths.append(str(tmp_path / name))
+    with open(paths[-1], "w") as f:
+      json.dump(doc, f)
+  out = str(tmp_path / "table")
+  T.main(["--task", "place_plate", "--sources", *paths, "--out", out])
+  with open(out + ".json") as f:
+    g = {x["trainer"]: x for x in json.load(f)["groups"]}
+  assert g["ours (playground preset)"]["time_to_80_safe"] == dict(scored=3, reached=2, mean=150.0, min=120.0, max=180.0)
+  assert g[T.BRAX]["time_to_80_safe"] == dict(scored=1, reached=1, mean=200.0, min=200.0, max=200.0)
+  md = open(out + ".md").read()
+  assert "| 150 (120–180), 2 / 3 reached |" in md and "| 200, 1 / 1 reached (2 not scored) |" in md
+  assert "| not reached |" in md and md.count("| not scored |") == 2
