@@ -88,6 +88,7 @@ from train.ppo import init_source  # noqa: E402
 from train.evaluate import episode_keys, evaluate, make_evaluator, parametrized_policy  # noqa: E402
 from train.evaluate import metrics as eval_metrics  # noqa: E402
 from train.networks import POLICY_ACTIONS, init_policy, policy_apply  # noqa: E402
+from rl_multiseed import time_to_safe  # noqa: E402  (sibling script: one definition of time to 80 % safe)
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
 RL_SETTINGS = tasks.RL_SETTINGS  # the setting each task is trained in (issue 24)
@@ -101,7 +102,6 @@ PLAYGROUND_PANDA_PICK_CUBE = {
 POLICY_LAYERS, VALUE_LAYERS = (32,) * 4, (256,) * 5
 EVAL_SEED = 12345
 CURVE_SEED = 54321  # the per-evaluation scoring's episodes: not the final evaluation's
-SAFE_BAR = (0.8, 0.8)  # time to 80 % safe: safe completion ≥ 0.8 and completion ≥ 0.8, as rl_multiseed.time_to_safe
 
 
 class _Budget(Exception):
@@ -169,14 +169,6 @@ def export_policy(path: str, params, env, task: str, settings: dict, weight: flo
 def policy_path(stem: str, weight: float, seed: int) -> str:
   """Where ``--export-policy`` writes the policy of the run (weight, seed) of the results ``stem``."""
   return f"{stem}_w{weight:g}_s{seed}_policy.npz"
-
-
-def time_to_safe(points: list[dict]) -> float | None:
-  """``wall_s`` of the first scored evaluation with safe completion and completion at the bars (SAFE_BAR)."""
-  for p in points:
-    if p["safe_completion"] >= SAFE_BAR[0] and p["completion"] >= SAFE_BAR[1]:
-      return p["wall_s"]
-  return None
 
 
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
@@ -265,7 +257,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
       **({} if not curve_episodes else {
           "scored_curve": {"episodes": curve_episodes, "seed": CURVE_SEED, "action": actions[0], "points": scored,
                            "seconds": round(scoring["seconds"], 1)},
-          "time_to_80_safe_s": time_to_safe(scored)}),
+          "time_to_80_safe_s": time_to_safe(scored, keys=("safe_completion", "completion", "wall_s"))}),
       **({} if init is None else {"init_from": os.path.basename(init[0]), "init_seed": init[1]}),
       **({} if export is None else {"policy_file": os.path.basename(export)}),
       "by_action": {a: {"completion": v["completion"], "safe_completion": v["safe_completion"],

@@ -336,11 +336,15 @@ def size_overrides(preset: str, args) -> dict:
   return out
 
 
-def time_to_safe(rows, safe=0.8, completion=0.8):
-  """Wall clock (s from the start of training) of the first evaluation with safe ≥ 0.8 and completion ≥ 0.8."""
+def time_to_safe(rows, safe=0.8, completion=0.8, keys=("eval/safe_completion", "eval/completion", "wall_time")):
+  """Wall clock (s from the start of training) of the first evaluation with safe ≥ 0.8 and completion ≥ 0.8.
+
+  ``keys``: the rows' (safe completion, completion, clock) entries; the default reads our trainer's history
+  (rl_brax_ppo.py passes its scored curve's)."""
+  k_safe, k_completion, k_clock = keys
   for r in rows:
-    if (r.get("eval/safe_completion") or 0) >= safe and (r.get("eval/completion") or 0) >= completion:
-      return r["wall_time"]
+    if (r.get(k_safe) or 0) >= safe and (r.get(k_completion) or 0) >= completion:
+      return r[k_clock]
   return None
 
 
