@@ -111,7 +111,10 @@ def _settings(*parts) -> str:
 
 
 def _task_settings(kw: dict | None) -> str:
-  return ", ".join(f"{k}={v}" for k, v in sorted((kw or {}).items()))
+  """Task keywords as ``k=v, …``; files written before the Panda became the default robot name none and
+  ran the gripper (as checkpoints and eval results of that time load), so they group with runs naming it."""
+  kw = {"robot": "gripper", **(kw or {})}
+  return ", ".join(f"{k}={v}" for k, v in sorted(kw.items()))
 
 
 def _budget(row: dict) -> str:

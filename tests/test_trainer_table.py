@@ -137,3 +137,23 @@ def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
   md = open(out + ".md").read()
   assert "| 150 (120–180), 2 / 3 reached |" in md and "| 200, 1 / 1 reached (2 not scored) |" in md
   assert "| not reached |" in md and md.count("| not scored |") == 2
+
+
+def test_files_from_before_the_panda_default_group_with_runs_naming_the_gripper(tmp_path):
+  """A results file naming no robot ran the gripper (the default then): it groups with one naming it, not the Panda's."""
+  old = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+         "rows": [_brax_row(2.0, 0, (1.0, 0.9))]}
+  new = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {},
+         "rows": [dict(_brax_row(2.0, 1, (1.0, 0.8)), task_settings={"robot": "gripper", "obs_mode": "paper"}),
+                  dict(_brax_row(2.0, 2, (1.0, 0.7)), task_settings={"robot": "panda", "obs_mode": "paper"})]}
+  paths = []
+  for name, doc in (("old.json", old), ("new.json", new)):
+    paths.append(str(tmp_path / name))
+    with open(paths[-1], "w") as f:
+      json.dump(doc, f)
+  out = str(tmp_path / "table")
+  T.main(["--task", "place_plate", "--action", "mode", "--sources", *paths, "--out", out])
+  with open(out + ".json") as f:
+    groups = json.load(f)["groups"]
+  seeds = sorted((g["settings"], g["seeds"]) for g in groups)
+  assert seeds == [("obs_mode=paper, robot=gripper", [0, 1]), ("obs_mode=paper, robot=panda", [2])]
