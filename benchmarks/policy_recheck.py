@@ -50,6 +50,9 @@ def parse(argv=None):
   p.add_argument("--backends", default="mjx,native", help=f"comma-separated of {','.join(BACKENDS)}")
   p.add_argument("--episodes", type=int, default=256)
   p.add_argument("--seed", type=int, default=0, help="episode sample (initial states, sampled actions)")
+  p.add_argument("--fragility", default="1",
+                 help="comma-separated fragility factors (damage thresholds ÷ f, scales × f; > 0), each a row: "
+                      "how far below the thresholds a policy stays (one compiled evaluator serves every level)")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="task keyword for policies without a checkpoint (a checkpoint brings its own)")
   p.add_argument("--tag", default="")
@@ -57,6 +60,7 @@ def parse(argv=None):
   args = p.parse_args(argv)
   args.policies = [s for s in args.policies.split(",") if s]
   args.backends = [b for b in args.backends.split(",") if b]
+  fragility_text = args.fragility
   try:  # everything checked before a task is built or compiled
     R.check_task(args.task)
     if not args.policies:
@@ -66,7 +70,14 @@ def parse(argv=None):
         raise ValueError(f"backends: unknown backend {b!r}; backends: {', '.join(BACKENDS)}")
     if not args.backends or len(set(args.backends)) != len(args.backends):
       raise ValueError(f"backends: give each of {', '.join(BACKENDS)} at most once, at least one")
-    E.check_args(args.episodes, 1.0, 95.0, seed=args.seed)
+    try:
+      args.fragility = [float(v) for v in fragility_text.split(",") if v.strip()]
+    except ValueError:
+      raise ValueError(f"fragility: comma-separated numbers, got {fragility_text!r}") from None
+    if not args.fragility:
+      raise ValueError("fragility: give at least one factor")
+    for f in args.fragility:
+      E.check_args(args.episodes, f, 95.0, seed=args.seed)
     trained = {s: R.policy_task_kwargs(s, args.task) for s in args.policies  # reads every checkpoint
                if R.parse_policy_spec(s)[0] == "checkpoint"}
     # the other policies (scripted references …) run where the checkpoints were trained, when they agree
@@ -83,7 +94,7 @@ def parse(argv=None):
 
 
 def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: int, seed: int,
-            shared: dict | None = None) -> dict:
+            shared: dict | None = None, fragility: float = 1.0) -> dict:
   """``spec`` on ``env`` (``task`` made with ``overrides``) over ``episodes`` episodes of ``backend``:
   E.evaluate's metrics.
 
@@ -94,9 +105,9 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
   policy = R.make_policy(spec, env)
   T = R.episode_length_of(env, task)
   key = None
-  if shared is not None and R.parse_policy_spec(spec)[0] == "checkpoint":
-    key = (os.path.realpath(R.checkpoint_path(spec)), R.checkpoint_action(spec),
-           json.dumps(overrides, sort_keys=True), backend)
+  if shared is not None:  # a scripted policy is kept too: its levels of fragility share its evaluator
+    key = ((os.path.realpath(R.checkpoint_path(spec)), R.checkpoint_action(spec))
+           if R.parse_policy_spec(spec)[0] == "checkpoint" else spec, json.dumps(overrides, sort_keys=True), backend)
   t0 = time.perf_counter()
   if key is not None and key in shared:
     ev = shared[key]
@@ -107,9 +118,9 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
     ev = E.make_evaluator(env_b, policy, T)
     if key is not None:
       shared[key] = ev
-  per_ep = ev.run(E.episode_keys(seed, episodes), 1.0, params=getattr(policy, "params", None))
+  per_ep = ev.run(E.episode_keys(seed, episodes), fragility, params=getattr(policy, "params", None))
   m = E.metrics(per_ep, ev.env.entity_names)
-  return {"policy": spec, "backend": backend, "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
+  return {"policy": spec, "backend": backend, "fragility": fragility, "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
           **{k: m[k] for k in ("completion", "safe_completion", "cost_mean", "avg_health", "min_env_health",
                                "task_return")}}
 
@@ -121,11 +132,14 @@ def render_md(res: dict) -> str:
            "entity's final health > 95. Policies as `mjx-damage eval --policy` names them (`#SEED`: the seed of a "
            "multi-seed run); the task settings come from each checkpoint.", "",
            f"Command: `{res['command']}`", "",
-           "| policy | backend | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "Fragility f: every damage threshold ÷ f and scale × f (1: the task's own); a policy whose safe "
+           "completion falls at f slightly above 1 stays just below the thresholds.", "",
+           "| policy | backend | fragility | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
   for r in res["rows"]:
     kind, sep, path = r["policy"].partition(":")
-    lines.append(f"| `{kind}{sep}{os.path.basename(path)}` | {r['backend']} | {100 * r['completion']:.1f} | "
+    lines.append(f"| `{kind}{sep}{os.path.basename(path)}` | {r['backend']} | {r.get('fragility', 1.0):g} | "
+                 f"{100 * r['completion']:.1f} | "
                  f"{100 * r['safe_completion']:.1f} | {r['cost_mean']:.2f} | {r['avg_health']:.2f} | "
                  f"{r['min_env_health']:.2f} | {r['task_return']:.1f} | {r['wall_s']:.0f} |")
   return "\n".join(lines) + "\n"
@@ -136,10 +150,11 @@ def main(argv=None) -> int:
   rows, shared = [], {}
   for spec, overrides, env in zip(args.policies, args.overrides, args.envs):
     for backend in args.backends:
-      rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared))
-      r = rows[-1]
-      print(f"{spec} [{backend}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
-            f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
+      for f in args.fragility:
+        rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f))
+        r = rows[-1]
+        print(f"{spec} [{backend}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
+              f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
   res = {"task": args.task, "episodes": args.episodes, "seed": args.seed, "rows": rows}
   stem = os.path.join(args.results_dir, f"policy_recheck_{args.task}" + (f"_{args.tag}" if args.tag else ""))
   provenance.save_results(res, "policy_recheck", argv, stem, render_md)

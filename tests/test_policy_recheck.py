@@ -60,6 +60,9 @@ def test_seed_suffix_loads_that_seeds_weights():
     (["--task", "pick_egg", "--policies", "zero", "--backends", "warp"], "backends: unknown backend 'warp'"),
     (["--task", "pick_egg", "--policies", "zero", "--backends", "mjx,mjx"], "backends: give each"),
     (["--task", "pick_egg", "--policies", "zero", "--episodes", "0"], "episodes"),
+    (["--task", "pick_egg", "--policies", "zero", "--fragility", "1,-2"], "fragility"),
+    (["--task", "pick_egg", "--policies", "zero", "--fragility", "one"], "fragility: comma-separated numbers"),
+    (["--task", "pick_egg", "--policies", "zero", "--fragility", "nan"], "fragility"),
     (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#7"], "policy: seed 7"),
     (["--task", "place_plate", "--policies", f"checkpoint:{SAFE}#1"], "trained on task 'pick_egg'"),
     (["--task", "pick_egg", "--policies", "zero", "--task-arg", "start=\"flying\""], "start"),
@@ -100,9 +103,21 @@ def test_seeds_of_one_checkpoint_share_one_evaluator_and_score_as_a_fresh_one():
   shared = {}
   rows = [recheck.rescore("pick_egg", env, spec, ov, "native", 4, 3, shared)
           for spec, ov, env in zip(a.policies, a.overrides, a.envs)]
-  assert len(shared) == 2  # mode and sample of the one file; the scripted reference is not kept
-  (ev_mode,) = [ev for k, ev in shared.items() if k[1] == "mode"]
+  assert len(shared) == 3  # mode and sample of the one file, and the scripted reference
+  (ev_mode,) = [ev for k, ev in shared.items() if k[0][1:] == ("mode",)]  # key: ((file, action), settings, backend)
   assert ev_mode.num_compiled == 1  # seeds 1 and 0 ran one per-step program
   fresh = recheck.rescore("pick_egg", a.envs[1], a.policies[1], a.overrides[1], "native", 4, 3)
   assert {k: v for k, v in rows[1].items() if k != "wall_s"} == {k: v for k, v in fresh.items() if k != "wall_s"}
   assert rows[0]["safe_completion"] != rows[1]["safe_completion"] or rows[0]["task_return"] != rows[1]["task_return"]
+
+
+def test_fragility_levels_share_one_evaluator_and_lower_safety_of_a_policy_near_the_thresholds(tmp_path):
+  """--fragility 1,4: one row per level from one compiled evaluator per policy; at 4 the thresholds are a
+  quarter, so a carry that was safe at 1 is not safer (and the rows say their level)."""
+  assert recheck.main(["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1", "--backends", "native",
+                       "--episodes", "8", "--fragility", "1,4", "--tag", "f", "--results-dir", str(tmp_path)]) == 0
+  with open(tmp_path / "policy_recheck_pick_egg_f.json") as f:
+    rows = json.load(f)["rows"]
+  assert [r["fragility"] for r in rows] == [1.0, 4.0]
+  assert rows[1]["safe_completion"] <= rows[0]["safe_completion"] and rows[1]["cost_mean"] > rows[0]["cost_mean"]
+  assert "| native | 4 |" in open(tmp_path / "policy_recheck_pick_egg_f.md").read()
