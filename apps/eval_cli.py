@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     warp_kw = R.warp_overrides(args.task, args.backend, args.episodes, len(jax.devices()))
     env = R.make_task(args.task, **overrides, **warp_kw)
     policy = R.make_policy(args.policy, env)
-    backend = R.pick_backend(args.backend, env)
+    backend = R.pick_backend(args.backend, env, policies=[args.policy])
     env = R.on_backend(env, backend, min(args.native_envs, args.episodes))
     episode_length = args.episode_length or R.episode_length_of(env, args.task)
   except ValueError as e:
@@ -71,7 +71,7 @@ def main(argv=None) -> int:
   platform = jax.default_backend()
   print(f"eval: task {args.task}, policy {args.policy}, {args.episodes} episodes x {episode_length} steps, "
         f"fragility {args.fragility:g}, seed {args.seed}, backend {backend}"
-        f"{' (auto)' if args.backend == 'auto' else ''}, "
+        f"{R.auto_reason(args.backend, backend, [args.policy])}, "
         f"device {platform} x {jax.device_count()}; "
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)

@@ -82,7 +82,7 @@ def main(argv=None) -> int:
     warp_kw = R.warp_overrides(args.task, args.backend, args.num_envs, len(jax.devices()))
     env = R.make_task(args.task, **R.task_overrides(args.task, trained, args.robot, args.task_arg), **warp_kw)
     policy = R.make_policy(args.policy, env)
-    args.backend = R.pick_backend(args.backend, env)  # auto → the backend used, as printed and recorded
+    args.backend = R.pick_backend(args.backend, env, policies=[args.policy])  # auto → the backend used, as printed and recorded
     env = R.on_backend(env, args.backend, args.num_envs)  # the rollout that makes the frames steps this env
     steps = args.steps or R.episode_length_of(env, args.task)
     if args.camera not in (None, "free"):

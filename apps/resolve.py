@@ -87,19 +87,35 @@ def warp_overrides(task: str, backend: str, num_envs: int, num_devices: int = 1)
   return {"backend": "warp", "num_envs": int(num_envs)}
 
 
-def pick_backend(backend: str, env, num_devices: int = 1) -> str:
+def pick_backend(backend: str, env, num_devices: int = 1, policies=()) -> str:
   """``mjx``, ``native`` or ``warp`` for ``--backend``: ``auto`` is whichever of mjx and native is faster
-  for ``env``; ``warp`` (an env made with :func:`warp_overrides`) stays as it is.
+  for ``env``, unless a policy is a trained one; ``warp`` (an env made with :func:`warp_overrides`) stays as
+  it is.
 
   That is native on a CPU run over one device whose scene the native backend runs (about 10x the
   MJX-JAX env-steps/s on 2 cores, 1.3x with liquid, whose particles run in JAX on either:
   benchmarks/results/native_backend_cpu.md, native_backend_cpu_pour_water.md, and with heat sources
-  native_backend_cpu_add_firewood.md), else mjx (accelerators, several devices). The two agree on completion and safe completion;
-  health and cost can differ (README, "Native batched backend")."""
+  native_backend_cpu_add_firewood.md), else mjx (accelerators, several devices). The two agree on the
+  scripted policies' completion and safe completion; health and cost can differ (README, "Native batched
+  backend"). ``policies`` (specs): with a checkpoint among them ``auto`` is mjx, the physics our trainers
+  train on, because a learned policy can sit close to a damage threshold that the other simulator's
+  contacts cross (Place Plate: 91 % safe on MJX, 10 % natively, docs/safe_rl.md "Learned policies on
+  native MuJoCo"); ``--backend native`` still asks for the other."""
   if check_backend(backend, warp=True) != "auto":
     return backend
+  if any(parse_policy_spec(p)[0] == "checkpoint" for p in policies):
+    return "mjx"
   cpu_only = jax.default_backend() == "cpu"
   return "native" if cpu_only and num_devices == 1 and tasks.native.supports(env) else "mjx"
+
+
+def auto_reason(requested: str, picked: str, policies=()) -> str:
+  """What to print after the backend ``auto`` picked: `` (auto)``, and why when a trained policy kept it on mjx."""
+  if requested != "auto":
+    return ""
+  if picked == "mjx" and any(parse_policy_spec(p)[0] == "checkpoint" for p in policies):
+    return " (auto: a trained policy is evaluated on the physics it was trained on; --backend native for MuJoCo's)"
+  return " (auto)"
 
 
 def on_backend(env, backend: str, num_envs: int, nthread: int = 0):
@@ -120,7 +136,7 @@ def add_backend_argument(ap, scope: str = "", default: str = "mjx", warp: bool =
   ap.add_argument("--backend", default=default,
                   help=f"physics (default {default}): mjx (compiled MJX-JAX, batched on any device), native "
                        "(MuJoCo on C threads, CPU), auto (native on a one-device CPU "
-                       "run where the scene allows, else mjx)" + (f"; {scope}" if scope else "")
+                       "run where the scene allows, mjx for a checkpoint policy or elsewhere)" + (f"; {scope}" if scope else "")
                        + (", or warp (MuJoCo Warp, one device; the warp extra)" if warp else ""))
 
 

@@ -160,7 +160,7 @@ def main(argv=None) -> int:
 
   def make_env(task):
     env = R.make_task(task, **overrides[task], **warp_kw[task])
-    backends[task] = R.pick_backend(args.backend, env, len(devices) * jax.process_count())
+    backends[task] = R.pick_backend(args.backend, env, len(devices) * jax.process_count(), policies)
     return R.on_backend(env, backends[task], native_envs)
 
   def describe(task, spec, backend):

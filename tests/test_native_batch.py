@@ -199,6 +199,17 @@ def test_auto_backend_picks_native_on_a_one_device_cpu_run_where_the_scene_allow
     R.pick_backend("mujoco", place)
 
 
+def test_auto_backend_keeps_a_trained_policy_on_the_physics_it_was_trained_on(tmp_path):
+  """A checkpoint among the policies: auto is mjx (our trainers' physics) even where native is faster; the
+  scripted ones and an explicit --backend native are unchanged."""
+  place = tasks.make("place_plate")
+  ckpt = tmp_path / "policy.npz"
+  ckpt.write_bytes(b"")  # the spec's form is what counts here; loading it is make_policy's job
+  assert R.pick_backend("auto", place, policies=["scripted:safe", "zero"]) == "native"
+  assert R.pick_backend("auto", place, policies=["scripted:safe", f"checkpoint+sample:{ckpt}"]) == "mjx"
+  assert R.pick_backend("native", place, policies=[f"checkpoint:{ckpt}"]) == "native"
+
+
 def test_eval_defaults_to_auto_and_records_the_backend_it_used(tmp_path, capsys):
   out = tmp_path / "r.json"
   assert eval_cli.main(["--task", "drop", "--policy", "zero", "--episodes", "2", "--episode-length", "3",
