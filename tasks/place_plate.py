@@ -63,6 +63,14 @@ the Panda too (tests/test_task_design.py). The longer horizon also hurt learning
 plate creeps down through its 5 cm pads and falls after about 145 steps, so with 200 steps the zero
 action, where a fresh policy starts, broke the plate in every episode
 (benchmarks/results/place_plate_in_hand_baselines_cpu.md, session 20's run).
+
+Counter (``counter``): ``"plane"`` (default; the cheapest contact in MJX) or ``"box"``, a 5 cm slab with
+the same top face z = 0. MJX's plane–box collision keeps only the plate corners within 1 mm of the
+deepest, so a plate landing a degree or more tilted hits with one edge on MJX and with both on MuJoCo C:
+its peak impact force is 0.56× MuJoCo's on the plane and 0.99–1.00× on the box
+(benchmarks/results/plane_box_contacts.md). A policy trained on the plane can place the plate just under
+the damage threshold by MJX's count and over it by MuJoCo's (docs/safe_rl.md, "Learned policies on
+native MuJoCo"); the box counter gives both simulators the same impacts.
 """
 
 from __future__ import annotations
@@ -102,9 +110,14 @@ class PlacePlate(Task):
   success_condition = "plate resting flat within 3 cm of the goal, gripper open"
   obs_modes = ("full", "paper")
   starts = ("counter", "in_hand")
+  counters = ("plane", "box")
+  COUNTER_HALF_THICK = 0.025  # m: the box counter's half thickness (its top face stays at z = 0)
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
-               success_bonus=1.0, start=None, hand_speed=None):
+               success_bonus=1.0, start=None, hand_speed=None, counter="plane"):
+    if counter not in self.counters:
+      raise ValueError(f"counter: unknown {counter!r}; valid: {', '.join(self.counters)}")
+    self.counter = counter
     if start is None:
       start = "in_hand" if obs_mode == "paper" else "counter"
     if start not in self.starts:
@@ -132,6 +145,11 @@ class PlacePlate(Task):
     return super().step(state, action)
 
   def edit_scene(self, spec: mujoco.MjSpec, robot_cls) -> None:
+    if self.counter == "box":  # box–box contacts: every corner of a tilted landing (module docstring)
+      g = spec.geom("counter")
+      g.type = mujoco.mjtGeom.mjGEOM_BOX
+      g.size = [g.size[0], g.size[1], self.COUNTER_HALF_THICK]
+      g.pos = [g.pos[0], g.pos[1], -self.COUNTER_HALF_THICK]
     self.plate_half_y = PLATE_HALF_Y.get(robot_cls.name, NARROW_PLATE_HALF_Y)
     self.grip_closed = R.squeeze_command(self.plate_half_y, robot_cls)
     if self.plate_half_y != PLATE_HALF:

@@ -99,6 +99,23 @@ def test_place_plate_rl_setting_with_the_panda_many_episodes():
         "place_plate (panda)")
 
 
+def test_place_plate_box_counter_keeps_the_separation_and_the_shortcut_preference():
+  """The box counter (MJX impacts as MuJoCo C's, tasks/place_plate.py) keeps the RL setting's design."""
+  check(run_policies("place_plate", {**DESIGNED["place_plate"], "counter": "box"}, episodes=16), "place_plate (box)")
+
+
+@pytest.mark.slow
+def test_place_plate_box_counter_many_episodes():
+  check(run_policies("place_plate", {**DESIGNED["place_plate"], "counter": "box"}, episodes=256, seed=1),
+        "place_plate (box)")
+
+
+def test_place_plate_counter_knob_refuses_unknown_shapes():
+  for bad in ("marble", "", None, 1):
+    with pytest.raises(ValueError, match="^counter: unknown"):
+      tasks.make("place_plate", counter=bad)
+
+
 @pytest.mark.slow
 def test_place_plate_counter_start_still_separates():
   """The scripted policies changed for the in-hand start; the counter start must keep its separation."""
