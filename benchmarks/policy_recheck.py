@@ -54,7 +54,8 @@ def parse(argv=None):
                  help="comma-separated fragility factors (damage thresholds ÷ f, scales × f; > 0), each a row: "
                       "how far below the thresholds a policy stays (one compiled evaluator serves every level)")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
-                 help="task keyword for policies without a checkpoint (a checkpoint brings its own)")
+                 help="task keyword over every policy's settings (a checkpoint brings its own; this one "
+                      "overrides them, e.g. counter=\"box\" to score Place Plate policies on the box counter)")
   p.add_argument("--tag", default="")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   args = p.parse_args(argv)
@@ -98,9 +99,9 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
   """``spec`` on ``env`` (``task`` made with ``overrides``) over ``episodes`` episodes of ``backend``:
   E.evaluate's metrics.
 
-  ``shared``: evaluators kept between calls, one per (checkpoint, action, settings, backend): the seeds of
-  one checkpoint differ only in their weights, which the evaluator takes as data, so one compiled program
-  scores them all (the numbers are those of a fresh evaluator: the same program, the same inputs).
+  ``shared``: evaluators kept between calls, one per (checkpoint and action, or scripted spec; settings;
+  backend): the seeds of one checkpoint differ only in their weights and the levels of ``fragility`` are an
+  argument, both data of the evaluator, so one compiled program scores them all (the numbers are those of a fresh evaluator: the same program, the same inputs).
   """
   policy = R.make_policy(spec, env)
   T = R.episode_length_of(env, task)

@@ -121,3 +121,14 @@ def test_fragility_levels_share_one_evaluator_and_lower_safety_of_a_policy_near_
   assert [r["fragility"] for r in rows] == [1.0, 4.0]
   assert rows[1]["safe_completion"] <= rows[0]["safe_completion"] and rows[1]["cost_mean"] > rows[0]["cost_mean"]
   assert "| native | 4 |" in open(tmp_path / "policy_recheck_pick_egg_f.md").read()
+
+
+def test_task_arg_overrides_a_checkpoints_settings():
+  """--task-arg counter="box" scores Place Plate policies trained on the plane counter on the box one."""
+  brax = os.path.join(ROOT, "benchmarks", "results", "rl_brax_place_plate_h200_scored_s0_w2_s0_policy.npz")
+  a = recheck.parse(["--task", "place_plate", "--policies", f"checkpoint:{brax}#0,scripted:safe",
+                     "--task-arg", 'counter="box"'])
+  for kw, env in zip(a.overrides, a.envs):
+    assert kw["counter"] == "box" and kw["obs_mode"] == "paper" and kw["robot"] == "gripper"
+    assert env.unwrapped.counter == "box"
+  assert recheck.parse(["--task", "place_plate", "--policies", f"checkpoint:{brax}#0"]).envs[0].unwrapped.counter == "plane"
