@@ -210,6 +210,27 @@ def test_auto_backend_keeps_a_trained_policy_on_the_physics_it_was_trained_on(tm
   assert R.pick_backend("native", place, policies=[f"checkpoint:{ckpt}"]) == "native"
 
 
+def test_eval_says_why_auto_kept_a_checkpoint_on_mjx(tmp_path, capsys, monkeypatch):
+  """The run's first line names the backend and the reason; stopped before anything compiles."""
+  ckpt = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks", "results",
+                      "rl_pick_egg_nvidia_h200_held_from_carry_ramp10_penalty_policy.npz")
+  seen = {}
+
+  class Stop(Exception):
+    pass
+
+  def stop(env, *a, **k):
+    seen["env"] = env
+    raise Stop
+
+  monkeypatch.setattr(eval_cli.E, "evaluate", stop)
+  with pytest.raises(Stop):
+    eval_cli.main(["--task", "pick_egg", "--policy", f"checkpoint:{ckpt}#1", "--episodes", "2",
+                   "--out", str(tmp_path / "r.json")])
+  assert not isinstance(seen["env"], NativeBatchEnv)
+  assert "backend mjx (auto: a trained policy is evaluated on the physics it was trained on" in capsys.readouterr().out
+
+
 def test_eval_defaults_to_auto_and_records_the_backend_it_used(tmp_path, capsys):
   out = tmp_path / "r.json"
   assert eval_cli.main(["--task", "drop", "--policy", "zero", "--episodes", "2", "--episode-length", "3",
