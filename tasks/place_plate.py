@@ -111,6 +111,7 @@ class PlacePlate(Task):
   obs_modes = ("full", "paper")
   starts = ("counter", "in_hand")
   counters = ("plane", "box")
+  counter = "plane"  # the instance's choice (__init__); a scene loaded without __init__ keeps the plane
   COUNTER_HALF_THICK = 0.025  # m: the box counter's half thickness (its top face stays at z = 0)
 
   def __init__(self, episode_length=None, n_substeps=6, obs_mode="full", terminate_on_success=False,
