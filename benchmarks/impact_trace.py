@@ -28,13 +28,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import mjx_damage  # noqa: E402,F401  (XLA:CPU flags and the jax compat shim before jax starts)
-import jax  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import provenance  # noqa: E402  (the sibling module: the results writer)
 from apps import resolve as R  # noqa: E402
-from mjx_damage.trajectory import mj_model_of  # noqa: E402
+from mjx_damage.trajectory import mj_model_of, rollout  # noqa: E402
 from train import evaluate as E  # noqa: E402
 
 BACKENDS = ("mjx", "native")
@@ -88,22 +87,12 @@ def tilt_deg(quat: np.ndarray) -> np.ndarray:
 
 
 def trace(env, policy, backend: str, episodes: int, seed: int, qpos_adr: int) -> dict:
-  """Per control step of every episode: F∥ f[T, N, L] (N) and the body's height f[T, N] (m) and tilt (deg)."""
-  T = R.episode_length_of(env)
-  stepped = R.on_backend(env, backend, episodes)
-  keys = E.episode_keys(seed, episodes)
-  reset = jax.jit(jax.vmap(stepped.reset)) if backend == "mjx" else stepped.reset
-  step = jax.jit(jax.vmap(stepped.step)) if backend == "mjx" else stepped.step
-  act = jax.jit(jax.vmap(policy))
-  s = reset(keys)
-  f, z, tilt = [], [], []
-  for t in range(T):
-    s = step(s, act(s, jax.vmap(lambda k: jax.random.fold_in(k, t))(keys)))
-    q = np.asarray(s.pipeline_state.qpos)
-    f.append(np.asarray(s.info["damage_state"].f_par))
-    z.append(q[:, qpos_adr + 2])
-    tilt.append(tilt_deg(q[:, qpos_adr + 3: qpos_adr + 7]))
-  return {"f_par": np.stack(f), "z": np.stack(z), "tilt": np.stack(tilt)}
+  """Per control step of every episode (:func:`mjx_damage.trajectory.rollout`, row t after t steps, 0 the reset):
+  F∥ f[T+1, N, L] (N) and the body's height f[T+1, N] (m) and tilt (deg)."""
+  tr = rollout(R.on_backend(env, backend, episodes), policy, steps=R.episode_length_of(env), seed=seed,
+               num_envs=episodes)
+  body = tr.qpos[..., qpos_adr: qpos_adr + 7]
+  return {"f_par": tr.f_par, "z": body[..., 2], "tilt": tilt_deg(body[..., 3:])}
 
 
 def summarise(tr: dict, links: list[str], body_link: int) -> dict:
@@ -113,7 +102,7 @@ def summarise(tr: dict, links: list[str], body_link: int) -> dict:
   lo = max(int(at[0]) - WINDOW, 0)
   return {"peak_f_par_N": dict(zip(links, f.max(0).mean(0).round(1).tolist())),
           "peak_step": at.tolist(),
-          "tilt_at_peak_deg": float(tilt[at - 1, n].mean()),  # the step before: the pose it lands in
+          "tilt_at_peak_deg": float(tilt[np.maximum(at - 1, 0), n].mean()),  # the step before: the pose it lands in
           "trace_episode_0": [{"step": t, "f_par_N": round(float(f[t, 0, body_link]), 1),
                                "z_m": round(float(tr["z"][t, 0]), 4), "tilt_deg": round(float(tilt[t, 0]), 2)}
                               for t in range(lo, min(int(at[0]) + WINDOW + 1, f.shape[0]))]}
@@ -123,7 +112,7 @@ def render_md(res: dict) -> str:
   lines = [f"# Impact on MJX and native MuJoCo: {res['task']}, {res['policy']}", "",
            f"Date: {res['date']}. Git: {res['git']}. jax {res['jax']} ({res['backend']}). {res['episodes']} episodes "
            f"from the same resets (episode seed {res['seed']}), each backend's policy acting on its own states. "
-           f"F∥: the largest per-substep value of the control step, N. Tilt of `{res['body']}`: angle of its z "
+           f"Step k: after k control steps. F∥: the largest per-substep value of the control step, N. Tilt of `{res['body']}`: angle of its z "
            "axis from the world's, degrees, at the step before its peak F∥.", "",
            f"Command: `{res['command']}`", "",
            "| link | peak F∥, MJX (N) | peak F∥, native (N) |", "|---|---|---|"]
