@@ -110,10 +110,14 @@ def _settings(*parts) -> str:
   return "; ".join(p for p in parts if p) or "defaults"
 
 
+# tasks.UNNAMED_ROBOT, the robot of files that name none; copied, not imported, so this script runs without JAX
+UNNAMED_ROBOT = "gripper"
+
+
 def _task_settings(kw: dict | None) -> str:
   """Task keywords as ``k=v, …``; files written before the Panda became the default robot name none and
   ran the gripper (as checkpoints and eval results of that time load), so they group with runs naming it."""
-  kw = {"robot": "gripper", **(kw or {})}
+  kw = {"robot": UNNAMED_ROBOT, **(kw or {})}
   return ", ".join(f"{k}={v}" for k, v in sorted(kw.items()))
 
 

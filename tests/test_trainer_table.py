@@ -141,6 +141,8 @@ def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
 
 def test_files_from_before_the_panda_default_group_with_runs_naming_the_gripper(tmp_path):
   """A results file naming no robot ran the gripper (the default then): it groups with one naming it, not the Panda's."""
+  import tasks  # the registry's rule, which this JAX-free script copies
+  assert T.UNNAMED_ROBOT == tasks.UNNAMED_ROBOT
   old = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
          "rows": [_brax_row(2.0, 0, (1.0, 0.9))]}
   new = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {},
