@@ -332,7 +332,9 @@ def _t80_label(row: dict) -> str:
     return "not scored"
   t = row["time_to_80_safe_s"]
   at = next((p["env_steps"] for p in c["points"] if p["wall_s"] == t), None) if t is not None else None
-  return f"not reached ({len(c['points'])} evaluations)" if t is None else f"{t:.0f} ({at / 1e6:.1f} M)"
+  shared = f", device shared by {row['card_shared_by']} runs" if row.get("card_shared_by", 1) > 1 else ""
+  return (f"not reached ({len(c['points'])} evaluations{shared})" if t is None
+          else f"{t:.0f} ({at / 1e6:.1f} M{shared})")
 
 
 def render_md(doc: dict) -> str:
@@ -427,11 +429,16 @@ def parse_args(argv=None):
                  help="also write each run's final policy beside the results, STEM_w<W>_s<SEED>_policy.npz "
                       "(our checkpoint format, ≈ 0.05 MB: re-scored by policy_recheck.py or eval, or an "
                       "--init-from of either trainer)")
+  p.add_argument("--shared-card", type=int, default=1, metavar="N",
+                 help="the runs of this call (or, with --merge, of the merged files) ran N at a time on one device: "
+                      "rows record it and their seconds are not compared with runs that had the device alone")
   p.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                  help="train nothing: merge the rows of these results files (runs of one task made by "
                       "separate processes, e.g. several on one GPU) into --out, or OUT_DIR/rl_brax_<task>_<device "
                       "of the first file>")
   a = p.parse_args(argv)
+  if a.shared_card < 1:
+    raise ValueError(f"shared_card: runs at a time on the device, >= 1, got {a.shared_card}")
   if a.merge is not None:
     a.merge_docs = [_load_results(path) for path in a.merge]
     tasks_seen = sorted({d["task"] for d in a.merge_docs})
@@ -496,16 +503,17 @@ def _add_row(doc: dict, row: dict) -> None:
                                   r["seed"], r["env_steps"], r.get("date") or ""))
 
 
-def merge(docs: list[dict], stem: str) -> dict:
+def merge(docs: list[dict], stem: str, shared_card: int = 1) -> dict:
   """The rows of ``docs`` (and of an existing ``stem``.json) in one table at ``stem``; later files win a
-  shared key. Device, recipe and settings of the header come from the last file."""
+  shared key. Device, recipe and settings of the header come from the last file. ``shared_card`` > 1: the
+  runs of ``docs`` ran that many at a time on one device (recorded in their rows)."""
   out = dict(docs[-1], rows=[], notes=[])
   if os.path.exists(stem + ".json"):
     old = _load_results(stem + ".json")
     out["rows"], out["notes"] = old["rows"], old.get("notes", [])
   for d in docs:
     for row in d["rows"]:
-      _add_row(out, row)
+      _add_row(out, dict(row, card_shared_by=shared_card) if shared_card > 1 else row)
     out["notes"] += [n for n in d.get("notes", []) if n not in out["notes"]]
   write_json(stem + ".json", out)
   write_text(stem + ".md", render_md(out))
@@ -516,7 +524,7 @@ def main(argv=None) -> int:
   a = parse_args(argv)
   if a.merge is not None:
     stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug(a.merge_docs[0]['device'])}")
-    merged = merge(a.merge_docs, stem)
+    merged = merge(a.merge_docs, stem, a.shared_card)
     print(f"wrote {stem}.json / .md ({len(merged['rows'])} rows)")
     return 0
   command = "python benchmarks/rl_brax_ppo.py " + " ".join(
@@ -545,7 +553,7 @@ def main(argv=None) -> int:
       row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init,
                       export=policy_path(stem, w, s) if a.export_policy else None, curve_episodes=a.curve_episodes)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
-                 recipe=doc["recipe"])
+                 recipe=doc["recipe"], **({"card_shared_by": a.shared_card} if a.shared_card > 1 else {}))
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "
             f"{row['env_steps']} env-steps, {row['train_wall_s']} s, time to 80 % safe "
             f"{_t80_label(row)}", flush=True)

@@ -145,7 +145,9 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
                                         _task_settings(r.get("task_settings", doc.get("task_settings")))),
                      env_steps=r["env_steps"], scores=s, command=r["command"], source=source,
                      date=r.get("date"), t80=r.get("time_to_80_safe_s"),
-                     t80_scored=(r.get("scored_curve") or {}).get("action") == "mode"))
+                     # a run that shared its device with others has no comparable seconds
+                     t80_scored=(r.get("scored_curve") or {}).get("action") == "mode"
+                     and r.get("card_shared_by", 1) == 1, shared_by=r.get("card_shared_by", 1)))
   return runs
 
 
@@ -204,7 +206,8 @@ def groups(runs: list[dict]) -> list[dict]:
     timed = [r for r in rs if r["t80_scored"]]
     t = [r["t80"] for r in timed if r["t80"] is not None]
     g["time_to_80_safe"] = dict(scored=len(timed), reached=len(t), mean=sum(t) / len(t) if t else None,
-                                min=min(t, default=None), max=max(t, default=None))
+                                min=min(t, default=None), max=max(t, default=None),
+                                shared=sum(r.get("shared_by", 1) > 1 for r in rs))
   return list(out.values())
 
 
@@ -224,7 +227,7 @@ def _steps(lo_hi) -> str:
 def _t80(t: dict, runs: int) -> str:
   """A group's time to 80 % safe: 'mean (min–max) s, k / n reached' over its timed runs."""
   if not t["scored"]:
-    return "not scored"
+    return "not timed (device shared)" if t.get("shared") == runs else "not scored"
   rest = f" ({runs - t['scored']} not scored)" if runs > t["scored"] else ""
   if not t["reached"]:
     return f"none of {t['scored']} reached{rest}"
@@ -233,6 +236,8 @@ def _t80(t: dict, runs: int) -> str:
 
 
 def _run_t80(r: dict) -> str:
+  if r.get("shared_by", 1) > 1:  # a run's seconds while others ran on its device time nothing comparable
+    return f"not timed (device shared by {r['shared_by']} runs)"
   if not r["t80_scored"]:
     return "not scored"
   return "not reached" if r["t80"] is None else f"{r['t80']:.0f}"

@@ -135,6 +135,26 @@ def test_merge_combines_the_files_of_separate_processes_into_one_table(tmp_path)
   assert md.count("| w 2.0 |") == 2 and "| 2026-11-29 05:50 |" in md and "| 2026-11-30 07:00 |" in md
 
 
+def test_merge_records_runs_that_shared_one_device(tmp_path):
+  """--shared-card N: the merged rows say their runs ran N at a time, and their time to 80 % says so."""
+  import json
+  row = dict(_row(2.0, 0, 0.9), time_to_80_safe_s=400.0,
+             scored_curve={"action": "mode", "episodes": 256, "points": [{"wall_s": 400.0, "env_steps": 6_553_600}]})
+  path = str(tmp_path / "p.json")
+  with open(path, "w") as f:
+    json.dump({"task": "place_plate", "task_settings": {}, "device": "NVIDIA H200", "recipe": {}, "rows": [row]}, f)
+  assert R.main(["--merge", path, "--shared-card", "3", "--out", str(tmp_path / "m")]) == 0
+  with open(tmp_path / "m.json") as f:
+    assert [r["card_shared_by"] for r in json.load(f)["rows"]] == [3]
+  assert "| 400 (6.6 M, device shared by 3 runs) |" in (tmp_path / "m.md").read_text()
+  assert R.main(["--merge", path, "--out", str(tmp_path / "alone")]) == 0  # by default: nothing recorded
+  with open(tmp_path / "alone.json") as f:
+    assert "card_shared_by" not in json.load(f)["rows"][0]
+  for bad in ("0", "-2"):
+    with pytest.raises(ValueError, match="shared_card"):
+      R.parse_args(["--merge", path, "--shared-card", bad])
+
+
 def test_merge_refuses_unreadable_files_and_mixed_tasks(tmp_path):
   import json
   bad = tmp_path / "bad.json"

@@ -132,11 +132,31 @@ def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
   T.main(["--task", "place_plate", "--sources", *paths, "--out", out])
   with open(out + ".json") as f:
     g = {x["trainer"]: x for x in json.load(f)["groups"]}
-  assert g["ours (playground preset)"]["time_to_80_safe"] == dict(scored=3, reached=2, mean=150.0, min=120.0, max=180.0)
-  assert g[T.BRAX]["time_to_80_safe"] == dict(scored=1, reached=1, mean=200.0, min=200.0, max=200.0)
+  assert g["ours (playground preset)"]["time_to_80_safe"] == dict(scored=3, reached=2, mean=150.0, min=120.0, max=180.0,
+                                                                 shared=0)
+  assert g[T.BRAX]["time_to_80_safe"] == dict(scored=1, reached=1, mean=200.0, min=200.0, max=200.0, shared=0)
   md = open(out + ".md").read()
   assert "| 150 (120–180), 2 / 3 reached |" in md and "| 200, 1 / 1 reached (2 not scored) |" in md
   assert "| not reached |" in md and md.count("| not scored |") == 2
+
+
+def test_runs_that_shared_their_device_are_not_timed(tmp_path):
+  """rl_brax_ppo.py --shared-card N rows: scored by the mode at every evaluation, but their seconds ran beside other
+  runs, so the group's time to 80 % counts none of them and each run says why."""
+  curve = {"action": "mode", "episodes": 256, "points": []}
+  rows = [dict(_brax_row(2.0, s, (1.0, 0.95)), time_to_80_safe_s=400.0, scored_curve=curve, card_shared_by=3)
+          for s in (0, 1)]
+  path = str(tmp_path / "brax.json")
+  with open(path, "w") as f:
+    json.dump({"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+               "rows": rows}, f)
+  out = str(tmp_path / "table")
+  T.main(["--task", "place_plate", "--sources", path, "--out", out])
+  with open(out + ".json") as f:
+    (g,) = json.load(f)["groups"]
+  assert g["time_to_80_safe"]["scored"] == 0 and g["time_to_80_safe"]["shared"] == 2 and g["meet_bar"] == 2
+  md = open(out + ".md").read()
+  assert "| not timed (device shared) |" in md and md.count("| not timed (device shared by 3 runs) |") == 2
 
 
 def test_files_from_before_the_panda_default_group_with_runs_naming_the_gripper(tmp_path):
