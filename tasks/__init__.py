@@ -70,7 +70,11 @@ _REGISTRY = {
 # observation and in-hand start; Pick Egg: the egg carried to a goal. Tasks not listed: their defaults.
 # The robot is named: the committed RL results were trained with the gripper, which is no longer the
 # default robot (the Panda's Place Plate runs pass --task-settings '{"robot": "panda"}').
-RL_SETTINGS = {"place_plate": {"robot": "gripper", "obs_mode": "paper"},
+# Place Plate's counter is a box (since 2026-11-29): on MJX's plane a tilted plate's impact is 0.56× MuJoCo
+# C's, so policies trained there are safe on MJX only (docs/safe_rl.md, "Learned policies on native MuJoCo").
+# Results files and checkpoints naming no counter ran the plane (the task's default); their commands rerun
+# as made with --task-settings '{"counter": "plane"}'.
+RL_SETTINGS = {"place_plate": {"robot": "gripper", "obs_mode": "paper", "counter": "box"},
                "pick_egg": {"robot": "gripper", "goal": "carry"},
                "shelve_item": {"robot": "gripper"}}
 

@@ -70,7 +70,8 @@ deepest, so a plate landing a degree or more tilted hits with one edge on MJX an
 its peak impact force is 0.56× MuJoCo's on the plane and 0.99–1.00× on the box
 (benchmarks/results/plane_box_contacts.md). A policy trained on the plane can place the plate just under
 the damage threshold by MJX's count and over it by MuJoCo's (docs/safe_rl.md, "Learned policies on
-native MuJoCo"); the box counter gives both simulators the same impacts.
+native MuJoCo"); the box counter gives both simulators the same impacts, and is Place Plate's RL setting
+(``tasks.RL_SETTINGS``).
 """
 
 from __future__ import annotations
