@@ -48,3 +48,18 @@ def test_the_gripper_and_its_file_names_whatever_the_registry_default(monkeypatc
   backend = scripted_policies.jax.default_backend()
   assert ran == ["gripper", "scripted_policies", "gripper", "scripted_policies_rl",
                  "panda", f"scripted_policies_panda_{backend}"]
+
+
+def test_rl_settings_leave_the_robot_to_the_flag(monkeypatch):
+  """--rl-settings: the RL setting's other keywords reach make() beside --robot (it names a robot too, which once
+  made every --rl-settings run fail with 'multiple values for keyword argument robot')."""
+  seen = []
+  monkeypatch.setattr(scripted_policies, "run_task", lambda name, e, s, c, robot, settings: seen.append(
+      (name, robot, settings)) or [])
+  monkeypatch.setattr(scripted_policies, "write", lambda *a, **k: None)
+  assert scripted_policies.main(["--tasks", "place_plate,pick_egg", "--rl-settings", "--name", "unused"]) == 0
+  for name, robot, settings in seen:
+    assert "robot" not in settings and settings == {
+        k: v for k, v in tasks.RL_SETTINGS[name].items() if k != "robot"}
+    tasks.make(name, robot=robot, **settings)  # what run_task builds: accepted (no compile)
+  assert [r for _, r, _ in seen] == ["gripper", "gripper"]
