@@ -18,8 +18,9 @@ committed file), and the group counts the runs that meet the bar of its reward:
 Time to 80 % safe: seconds of training (compile included) to the run's first periodic evaluation by the mode
 with ≥ 80 % safe and ≥ 80 % completion, as each trainer's file gives it (ours: its periodic evaluations;
 Brax: rows run with ``rl_brax_ppo.py --curve-episodes``, our evaluator at each of brax's evaluations; earlier
-Brax rows and rows scored by another action count as not scored). Times are comparable only between runs on
-one kind of device, each alone on it; our trainer's seeds of one call train in one program and share its clock.
+Brax rows and rows scored by another action count as not scored; rows of runs that shared their device,
+``rl_brax_ppo.py --shared-card N``, as not timed). Times are comparable only between runs on one kind of
+device, each alone on it; our trainer's seeds of one call train in one program and share its clock.
 
 A second table lists every run with its seed, device, env steps, scores and the command that made it.
 
