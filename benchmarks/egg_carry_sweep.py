@@ -79,7 +79,7 @@ def run(episodes: int, accels, seed: int, robot: str = "gripper") -> dict:
       row[f"shortcut_gain_gamma_{g:g}_mean"], row[f"shortcut_gain_gamma_{g:g}_min"] = float(d.mean()), float(d.min())
     rows.append(row)
     print(row, flush=True)
-  settings = {k: v for k, v in tasks.RL_SETTINGS["pick_egg"].items() if k != "robot"}  # the robot: --robot
+  settings = tasks.rl_overrides("pick_egg")  # the robot: --robot
   return {"task": "pick_egg", "settings": settings, "episode_length": length, "rows": rows}
 
 

@@ -173,11 +173,6 @@ def write(rows: list[dict], command: str, stem: str = "scripted_policies") -> No
   write_text(os.path.join(RESULTS, stem + ".md"), "\n".join(lines) + "\n")
 
 
-def rl_settings(name: str) -> dict:
-  """Task ``name``'s RL setting (tasks.RL_SETTINGS) as make() overrides besides the robot, which --robot gives."""
-  return {k: v for k, v in tasks.RL_SETTINGS.get(name, {}).items() if k != "robot"}
-
-
 def main(argv=None) -> int:
   p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
   p.add_argument("--episodes", type=int, default=256)
@@ -204,7 +199,8 @@ def main(argv=None) -> int:
   COMMAND = command.strip()
   rows = []
   for n in names:
-    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes, a.robot, rl_settings(n) if a.rl_settings else {})
+    rows += run_task(n, a.episodes, a.seed, a.chunk or a.episodes, a.robot,
+                     tasks.rl_overrides(n) if a.rl_settings else {})
     write(rows, command.strip(), stem)  # partial results survive an interrupted run
   return 0
 

@@ -103,6 +103,12 @@ def task_class(name: str):
   return getattr(importlib.import_module(module), cls)
 
 
+def rl_overrides(name: str) -> dict:
+  """Task ``name``'s RL setting (:data:`RL_SETTINGS`) without its robot: the make() keywords for a script whose
+  ``--robot`` chooses the robot."""
+  return {k: v for k, v in RL_SETTINGS.get(name, {}).items() if k != "robot"}
+
+
 def rl_settings(name: str, overrides_json: str | None = None) -> dict:
   """Task ``name``'s RL setting (:data:`RL_SETTINGS`) with the task keywords of a JSON object over it.
 
