@@ -229,7 +229,10 @@ def _t80(t: dict, runs: int) -> str:
   """A group's time to 80 % safe: 'mean (min–max) s, k / n reached' over its timed runs."""
   if not t["scored"]:
     return "not timed (device shared)" if t.get("shared") == runs else "not scored"
-  rest = f" ({runs - t['scored']} not scored)" if runs > t["scored"] else ""
+  shared, unscored = t.get("shared", 0), runs - t["scored"] - t.get("shared", 0)
+  rest = ", ".join(([f"{shared} not timed (device shared)"] if shared else [])
+                   + ([f"{unscored} not scored"] if unscored > 0 else []))
+  rest = f" ({rest})" if rest else ""
   if not t["reached"]:
     return f"none of {t['scored']} reached{rest}"
   span = f"{t['mean']:.0f}" if t["min"] == t["max"] else f"{t['mean']:.0f} ({t['min']:.0f}–{t['max']:.0f})"

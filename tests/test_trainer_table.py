@@ -159,6 +159,22 @@ def test_runs_that_shared_their_device_are_not_timed(tmp_path):
   assert "| not timed (device shared) |" in md and md.count("| not timed (device shared by 3 runs) |") == 2
 
 
+def test_a_group_of_alone_and_shared_runs_times_the_alone_ones(tmp_path):
+  """Brax runs of one setting, some alone on their device and some sharing it: the group's time counts the
+  alone ones and names the shared ones as not timed (not as "not scored", which means another action)."""
+  curve = {"action": "mode", "episodes": 256, "points": []}
+  rows = [dict(_brax_row(2.0, s, (1.0, 0.95)), time_to_80_safe_s=100.0 + s, scored_curve=curve,
+               card_shared_by=3 if s < 2 else 1) for s in (0, 1, 2)]
+  path = str(tmp_path / "brax.json")
+  with open(path, "w") as f:
+    json.dump({"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+               "rows": rows}, f)
+  out = str(tmp_path / "table")
+  T.main(["--task", "place_plate", "--sources", path, "--out", out])
+  md = open(out + ".md").read()
+  assert "| 102, 1 / 1 reached (2 not timed (device shared)) |" in md and "not scored" not in md
+
+
 def test_files_from_before_the_panda_default_group_with_runs_naming_the_gripper(tmp_path):
   """A results file naming no robot ran the gripper (the default then): it groups with one naming it, not the Panda's."""
   import tasks  # the registry's rule, which this JAX-free script copies
