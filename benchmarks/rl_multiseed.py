@@ -47,6 +47,12 @@ call continues it with --resume (the row lists every call)::
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --tag paper_task_only --results-dir $OUT
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --resume --tag paper_task_only --results-dir $OUT
 
+At the paper's own scale (10⁵ steps per seed, 512 per update in 8 minibatches of 64; CPU, 10–11 min per
+reward), with CleanRL's target-KL rule and the std a parameter (docs/safe_rl.md, "At the paper's own scale")::
+
+    Q="--num-envs 8 --unroll-length 64 --paper-timesteps 99840 --timesteps 99840 --seeds 0,1,2 --budget-seconds 3000"
+    python benchmarks/rl_multiseed.py --methods paper_task_only,paper --target-kl-rule epoch --policy-std parameter $Q --eval-every 25600 --eval-envs 128 --eval-actions sample,mode --tag paper_8x64
+
 ``--anneal-lr --timesteps N``: the learning rate (1e-3 in the playground preset) decays linearly to 0 over
 N env steps per seed instead of staying constant (the paper preset always anneals); for long runs whose
 late iterates collapse (docs/rl_task_design.md, Pick Egg's penalty phase).
@@ -128,6 +134,11 @@ def method_spec(name: str, args) -> dict:
   if args.anneal_lr and spec["preset"] != "paper":  # the paper preset anneals already
     spec = dict(spec, label=spec["label"] + f", lr annealed to 0 over {args.timesteps:.3g} steps",
                 anneal_learning_rate=True)
+  if args.target_kl_rule is not None and spec["preset"] == "paper":  # the only preset with a target KL
+    spec = dict(spec, label=spec["label"] + f", target-KL rule {args.target_kl_rule}",
+                target_kl_rule=args.target_kl_rule)
+  if args.policy_std is not None:
+    spec = dict(spec, label=spec["label"] + f", std a {args.policy_std}", policy_std=args.policy_std)
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
@@ -165,6 +176,13 @@ def parse(argv):
                       "the paper preset always anneals)")
   p.add_argument("--paper-timesteps", type=float, default=1e7,
                  help="env steps per seed of the paper methods: their lr anneals linearly to 0 over this many")
+  p.add_argument("--target-kl-rule", default=None, choices=("minibatch", "epoch"),
+                 help="paper methods: how the target KL stops the epochs — minibatch (SB3: before a step whose KL "
+                      "> 1.5·target; the preset's) or epoch (CleanRL: after an epoch whose last step began above "
+                      "the target); train/config.py")
+  p.add_argument("--policy-std", default=None, choices=("state", "parameter"),
+                 help="every method: the policy's std an output of the actor per state (brax's; the presets') or "
+                      "one learned parameter per action dimension (SB3's, CleanRL's); train/config.py")
   p.add_argument("--num-envs", type=int, default=None, help="envs per seed (default: the preset's)")
   p.add_argument("--unroll-length", type=int, default=None, help="default: the preset's")
   p.add_argument("--damage-weight", type=float, default=2.0)

@@ -33,6 +33,8 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--timesteps", "-1"], "--timesteps"),
     (["--timesteps", "nan"], "--timesteps"),
     (["--anneal-lr"], "--anneal-lr"),  # over the default 1e9 steps it would barely decay
+    (["--target-kl-rule", "batch"], "--target-kl-rule"),
+    (["--policy-std", "global"], "--policy-std"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -171,6 +173,20 @@ def test_anneal_lr_reaches_the_playground_methods_and_names_its_horizon():
   assert "anneal_learning_rate" not in rl_multiseed.method_spec("paper", a)  # the preset anneals already
   plain = rl_multiseed.parse(["--methods", "penalty"])
   assert plain.timesteps == 1e9 and "anneal_learning_rate" not in rl_multiseed.method_spec("penalty", plain)
+
+
+def test_target_kl_rule_reaches_the_paper_methods_only():
+  a = rl_multiseed.parse(["--methods", "paper,paper_task_only,penalty", "--target-kl-rule", "epoch"])
+  for m in ("paper", "paper_task_only"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert spec["target_kl_rule"] == "epoch" and "target-KL rule epoch" in spec["label"]
+  assert "target_kl_rule" not in rl_multiseed.method_spec("penalty", a)  # no target KL there to rule
+  assert "target_kl_rule" not in rl_multiseed.method_spec("paper", rl_multiseed.parse([]))  # the preset's own
+  a = rl_multiseed.parse(["--methods", "paper,penalty", "--policy-std", "parameter"])
+  for m in ("paper", "penalty"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert spec["policy_std"] == "parameter" and "std a parameter" in spec["label"]
+  assert "policy_std" not in rl_multiseed.method_spec("paper", rl_multiseed.parse([]))
 
 
 def test_a_ramp_without_warmup_is_labelled_as_one():

@@ -333,6 +333,35 @@ def test_paper_preset_initial_log_std_per_dimension():
   np.testing.assert_allclose(log_std, np.broadcast_to([-0.5, -0.5, -0.5, -1.5], log_std.shape), atol=1e-5)
 
 
+def test_parameter_std_is_the_same_in_every_state_and_learns(env, tmp_path):
+  """``policy_std="parameter"``: one log-std per action dimension, starting at ``init_log_std`` in every state,
+  moved by training (its gradient reaches it), saved and loaded with the run; the MLP gives only the mean."""
+  from brax.training.acme import running_statistics
+
+  from train import networks as N
+  cfg = train.PPOConfig(policy_std="parameter", init_log_std=(-0.5, -1.5), policy_hidden_sizes=(16, 16)).validate()
+  net = N.make_networks(6, 4, cfg)
+  params = N.init_policy(net, cfg, 4, jax.random.PRNGKey(0))
+  np.testing.assert_allclose(params["log_std"], [-0.5, -0.5, -0.5, -1.5])
+  obs = jax.random.normal(jax.random.PRNGKey(1), (64, 6)) * 3.0
+  logits = net.policy_network.apply(running_statistics.init_state(jnp.zeros((6,))), params, obs)
+  dist = net.parametric_action_distribution.create_dist(logits)
+  np.testing.assert_allclose(np.log(np.asarray(dist.scale)), np.broadcast_to([-0.5, -0.5, -0.5, -1.5], (64, 4)),
+                             atol=1e-5)
+  assert float(jnp.std(dist.loc)) > 0  # the mean still depends on the state
+  out = str(tmp_path / "run")
+  res = train.train(env, seed=0, num_timesteps=2 * ITER, eval_every=ITER, policy_std="parameter",
+                    init_log_std=(-0.5, -1.5), out_dir=out, **TINY)
+  assert res.config.policy_std == "parameter"
+  learned = np.asarray(res.seed_state(0).params.policy["log_std"])
+  assert learned.shape == (env.action_size,) and learned[0] != -0.5  # moved from its start
+  policy = train.load_policy(out, env=env)
+  assert policy.meta["config"]["policy_std"] == "parameter"
+  with pytest.raises(ValueError, match="policy_std"):
+    train.PPOConfig(policy_std="global").validate()
+  assert train.PPOConfig.from_json({}).policy_std == "state"  # runs from before: brax's head
+
+
 def test_target_kl_measures_the_updates_own_kl(env):
   """``target_kl`` stops on the KL the SGD steps made, not on the normaliser's shift since the rollout.
 
@@ -349,6 +378,22 @@ def test_target_kl_measures_the_updates_own_kl(env):
   huge = train.train(env, target_kl=1e6, **kw).history
   assert [r["sgd_steps"] for r in huge] == [float(steps)] * 3
   assert all(r["loss/kl_update"] > 0.0 for r in huge)
+
+
+def test_target_kl_epoch_rule_takes_whole_epochs(env):
+  """CleanRL's rule (``target_kl_rule="epoch"``) checks at the end of an epoch, against the target itself:
+  a tiny target keeps exactly the first epoch (every minibatch of it), a huge one all epochs; SB3's rule
+  with the same tiny target keeps one step. Unknown rules are refused before anything compiles."""
+  kw = dict(seed=0, num_timesteps=2 * ITER, eval_every=ITER, **TINY)
+  n_mb, epochs = TINY["num_minibatches"], TINY["num_updates_per_batch"]
+  tiny = train.train(env, target_kl=1e-7, target_kl_rule="epoch", **kw)
+  assert tiny.config.target_kl_rule == "epoch"
+  assert [r["sgd_steps"] for r in tiny.history] == [float(n_mb)] * 2
+  huge = train.train(env, target_kl=1e6, target_kl_rule="epoch", **kw).history
+  assert [r["sgd_steps"] for r in huge] == [float(n_mb * epochs)] * 2
+  with pytest.raises(ValueError, match="target_kl_rule"):
+    train.PPOConfig(target_kl=0.01, target_kl_rule="batch").validate()
+  assert train.PPOConfig.from_json({"target_kl": 0.01}).target_kl_rule == "minibatch"  # older runs: SB3's
 
 
 def test_normalizer_after_update_starts_the_ratio_at_one(env):

@@ -120,7 +120,11 @@ CONFIG_FLAGS = (
     ("--value-cost", "value_cost", float, "weight of the value loss"),
     ("--reward-scaling", "reward_scaling", float, None),
     ("--max-grad-norm", "max_grad_norm", float, "per-network gradient-norm clip"),
-    ("--target-kl", "target_kl", float, "stop an iteration's epochs once KL > 1.5·target"),
+    ("--target-kl", "target_kl", float, "stop an iteration's epochs early once the update's KL is too large"),
+    ("--policy-std", "policy_std", str, "state (brax: the std an output of the actor, per state) or parameter "
+     "(one learned log-std per action dimension, as in SB3 and CleanRL)"),
+    ("--target-kl-rule", "target_kl_rule", str, "minibatch (SB3: before a step whose KL > 1.5·target) or epoch "
+     "(CleanRL: after an epoch whose last step began above the target)"),
     ("--eval-every", "eval_every", _int, "env steps between evaluations (0: at the end)"),
     ("--checkpoint-every", "checkpoint_every", _int, "env steps between checkpoints (0: at the end)"),
     ("--eval-envs", "num_eval_envs", _int, "deterministic evaluation episodes per seed"),

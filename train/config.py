@@ -16,7 +16,10 @@ Presets (``PPOConfig.preset(name, **overrides)``, ``mjx-damage train --preset NA
   grad-norm 0.5, target KL 0.01 (epochs stop early), γ 0.99, GAE λ 0.95
   (paper, table "PPO hyperparameters for Place Plate"). The paper trains one
   env for 1e5 steps (≈ 195 rollouts of 512); here the rollout is batched over
-  256 envs (8 minibatches of 32 sequences × 512 steps).
+  256 envs (8 minibatches of 32 sequences × 512 steps). The table leaves the
+  target-KL rule and where the std lives to the implementation:
+  ``target_kl_rule`` and ``policy_std`` choose them (docs/safe_rl.md, "At the
+  paper's own scale"); the preset keeps SB3's rule and brax's per-state std.
 * ``legacy`` — this trainer's defaults before the multi-seed rewrite (1024
   envs, 8 minibatches, 4 epochs, entropy 1e-3, lr 3e-4, 256×2 swish); kept for
   comparison (the committed single-seed ``rl_place_plate_nvidia_h100_*`` rows of the
@@ -36,6 +39,8 @@ import numpy as np
 
 ACTIVATION_NAMES = ("tanh", "swish", "relu", "elu")
 MULTIPLIERS = ("lagrangian", "pid")
+TARGET_KL_RULES = ("minibatch", "epoch")
+POLICY_STDS = ("state", "parameter")
 
 # Config fields that may change when a run is resumed: they decide how long to
 # run and what to log, never what a training iteration computes.
@@ -74,11 +79,21 @@ class PPOConfig:
   value_cost: float = 0.5  # brax's PPO loss weights the value term by 0.5 (the paper's coefficient)
   reward_scaling: float = 1.0
   max_grad_norm: Optional[float] = 1.0
-  target_kl: Optional[float] = None  # stop an iteration's epochs once the update's KL > 1.5·target (SB3's rule)
+  target_kl: Optional[float] = None  # stop an iteration's epochs early once the update's KL is too large
+  # How ``target_kl`` stops the epochs. "minibatch" (SB3's rule): before any minibatch step whose KL
+  # exceeds 1.5·target, so the first step is always taken. "epoch" (CleanRL's rule): at the end of an
+  # epoch whose last minibatch began above the target, so a whole epoch is always taken. The paper's
+  # table names the target, not the rule; with 512×2 nets at lr 1e-3 one Adam step already passes
+  # 1.5·0.01, so the minibatch rule takes one step per iteration (docs/safe_rl.md).
+  target_kl_rule: str = "minibatch"
   policy_hidden_sizes: tuple[int, ...] = (32, 32, 32, 32)
   value_hidden_sizes: tuple[int, ...] = (256, 256, 256, 256, 256)
   activation: str = "swish"
   init_log_std: Optional[tuple[float, float]] = None  # (arm, gripper = last action dim); None: brax's init
+  # Where the policy's std comes from. "state": brax's tanh-normal head, the scale an output of the actor's
+  # MLP (so it can differ per state). "parameter": one learned log-std per action dimension, the same in
+  # every state (SB3's log_std_init, CleanRL's actor_logstd: what a table's "initial log-std" names).
+  policy_std: str = "state"
   normalize_observations: bool = True
   # False: the observation normaliser keeps the statistics the run started with. For fine-tuning a
   # pre-trained actor (train(init_from=...)): its weights were fitted to those statistics, and
@@ -228,6 +243,10 @@ class PPOConfig:
     number("reward_scaling", lo=0, lo_open=True)
     number("max_grad_norm", lo=0, lo_open=True, allow_none=True)
     number("target_kl", lo=0, lo_open=True, allow_none=True)
+    if self.policy_std not in POLICY_STDS:
+      raise ValueError(f"policy_std: one of {', '.join(POLICY_STDS)}, got {self.policy_std!r}")
+    if self.target_kl_rule not in TARGET_KL_RULES:
+      raise ValueError(f"target_kl_rule: one of {', '.join(TARGET_KL_RULES)}, got {self.target_kl_rule!r}")
     number("damage_weight", lo=0)
     for name in ("damage_warmup_steps", "damage_ramp_steps"):
       v = getattr(self, name)
@@ -278,7 +297,8 @@ class PPOConfig:
     # Older checkpoints lack the newer fields: they ran with what these were then.
     old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
            "value_cost": 0.5, "budget_anneal_steps": 0,
-           "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False}
+           "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False,
+           "target_kl_rule": "minibatch", "policy_std": "state"}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

@@ -221,7 +221,8 @@ class Trainer:
 
   # -- learning -------------------------------------------------------------
   def _minibatch(self, normalizer, weights, start_policy, carry, inp):
-    """One SGD step; with ``target_kl`` a step whose pre-update KL exceeds 1.5·target stops the rest.
+    """One SGD step; with ``target_kl`` (rule "minibatch") a step whose pre-update KL exceeds 1.5·target
+    stops the rest (rule "epoch": see _epoch).
 
     That KL is the update's own: ``start_policy`` (the parameters when the epochs began) against the
     policy now, both under ``normalizer``. brax's ``kl_mean`` metric compares with the logits the
@@ -239,7 +240,8 @@ class Trainer:
     metrics = self._pmean({k: metrics[k] for k in self._loss_keys})  # one KL on every shard: they stop together
     if self.cfg.target_kl is None:
       return (new_params, new_opt, stopped), (metrics, jnp.ones(()))
-    stop = stopped | (metrics["kl_update"] > 1.5 * self.cfg.target_kl)
+    # CleanRL's rule ("epoch") never stops inside an epoch: _epoch decides at its end.
+    stop = stopped | ((metrics["kl_update"] > 1.5 * self.cfg.target_kl) & (self.cfg.target_kl_rule == "minibatch"))
     keep = lambda old, new: jax.tree.map(lambda a, b: jnp.where(stop, a, b), old, new)  # noqa: E731
     return (keep(params, new_params), keep(opt_state, new_opt), stop), (metrics, 1.0 - stop.astype(jnp.float32))
 
@@ -262,8 +264,13 @@ class Trainer:
     k_perm, k_loss = jax.random.split(key)
     n_mb = self.cfg.num_minibatches
     shuffled = jax.tree.map(lambda x: jax.random.permutation(k_perm, x).reshape((n_mb, -1) + x.shape[1:]), data)
-    return jax.lax.scan(functools.partial(self._minibatch, normalizer, weights, start_policy), carry,
-                        (shuffled, jax.random.split(k_loss, n_mb)))
+    carry, (metrics, taken) = jax.lax.scan(functools.partial(self._minibatch, normalizer, weights, start_policy),
+                                           carry, (shuffled, jax.random.split(k_loss, n_mb)))
+    if self.cfg.target_kl is not None and self.cfg.target_kl_rule == "epoch":
+      # CleanRL: the KL its last minibatch began with (before that step), against the target itself.
+      params, opt_state, stopped = carry
+      carry = (params, opt_state, stopped | (metrics["kl_update"][-1] > self.cfg.target_kl))
+    return carry, (metrics, taken)
 
   def update(self, ts: TrainState, data: types.Transition):
     """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order; with

@@ -10,7 +10,9 @@ gripper). Brax's tanh-normal policy has no std parameter to initialise — its
 scale comes out of the last layer — so :func:`init_policy` zeroes the weights
 of that layer's scale half and sets its bias to ``softplus⁻¹(exp(log_std) −
 0.001)``: the std starts at exactly ``exp(log_std)`` in every state and may
-become state-dependent as it learns.
+become state-dependent as it learns. With ``policy_std="parameter"`` the std is
+instead one learned log-std per action dimension, the same in every state (what
+SB3 and CleanRL learn): :func:`parameter_std_policy`.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import jax
 import jax.numpy as jnp
 import optax
 from brax.training import gradients, types
+from brax.training import networks as brax_networks
 from brax.training.acme import running_statistics
 from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
@@ -49,11 +52,42 @@ def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networ
       value_hidden_layer_sizes=tuple(cfg.value_hidden_sizes),
       activation=ACTIVATIONS[cfg.activation],
   )
+  if cfg.policy_std == "parameter":
+    nets = nets.__class__(policy_network=parameter_std_policy(obs_size, action_size, normalize, cfg),
+                          value_network=nets.value_network,
+                          parametric_action_distribution=nets.parametric_action_distribution)
   if not cfg.cost_critic:
     return nets
   value = CL.make_value_network(obs_size, normalize, cfg.value_hidden_sizes, ACTIVATIONS[cfg.activation])
   return nets.__class__(policy_network=nets.policy_network, value_network=value,
                         parametric_action_distribution=nets.parametric_action_distribution)
+
+
+def _softplus_inverse(y):
+  return y + jnp.log(-jnp.expm1(-y))
+
+
+def parameter_std_policy(obs_size: int, action_size: int, preprocess, cfg: PPOConfig):
+  """An actor whose std is a parameter, not an output: params ``{"mlp": …, "log_std": f32[A]}``.
+
+  ``apply`` returns what brax's tanh-normal distribution expects, ``[loc f32[..., A], head f32[..., A]]``
+  with ``softplus(head) + 0.001 = exp(log_std)`` in every state, so sampling, log-probs, entropy and the
+  PPO loss are brax's own. (Below log-std ln 0.001 the std stops at brax's floor.)"""
+  mlp = brax_networks.make_policy_network(action_size, obs_size, preprocess,
+                                          hidden_layer_sizes=tuple(cfg.policy_hidden_sizes),
+                                          activation=ACTIVATIONS[cfg.activation])
+
+  def init(key):
+    # brax's zero-initialised head gives std softplus(0) + 0.001; start there unless init_log_std says
+    return {"mlp": mlp.init(key),
+            "log_std": jnp.full((action_size,), jnp.log(jax.nn.softplus(0.0) + MIN_STD), jnp.float32)}
+
+  def apply(processor_params, params, obs):
+    loc = mlp.apply(processor_params, params["mlp"], obs)
+    head = _softplus_inverse(jnp.maximum(jnp.exp(params["log_std"]) - MIN_STD, 1e-6))
+    return jnp.concatenate([loc, jnp.broadcast_to(head, loc.shape)], axis=-1)
+
+  return brax_networks.FeedForwardNetwork(init=init, apply=apply)
 
 
 def initial_log_std(cfg: PPOConfig, action_size: int):
@@ -70,10 +104,12 @@ def init_policy(network: ppo_networks.PPONetworks, cfg: PPOConfig, action_size: 
   log_std = initial_log_std(cfg, action_size)
   if log_std is None:
     return params
+  if cfg.policy_std == "parameter":
+    return {**params, "log_std": log_std}
   layers = params["params"]
   last = max(layers, key=lambda name: int(name.rsplit("_", 1)[-1]))  # MLP layers are hidden_0..hidden_n
   std = jnp.maximum(jnp.exp(log_std) - MIN_STD, 1e-6)
-  bias = layers[last]["bias"].at[action_size:].set(std + jnp.log(-jnp.expm1(-std)))  # softplus⁻¹(std)
+  bias = layers[last]["bias"].at[action_size:].set(_softplus_inverse(std))
   kernel = layers[last]["kernel"].at[:, action_size:].set(0.0)  # the same std in every state at first
   return {**params, "params": {**layers, last: {**layers[last], "bias": bias, "kernel": kernel}}}
 
