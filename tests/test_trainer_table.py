@@ -140,18 +140,24 @@ def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
   assert "| not reached |" in md and md.count("| not scored |") == 2
 
 
-def test_runs_that_shared_their_device_are_not_timed(tmp_path):
-  """rl_brax_ppo.py --shared-card N rows: scored by the mode at every evaluation, but their seconds ran beside other
-  runs, so the group's time to 80 % counts none of them and each run says why."""
-  curve = {"action": "mode", "episodes": 256, "points": []}
-  rows = [dict(_brax_row(2.0, s, (1.0, 0.95)), time_to_80_safe_s=400.0, scored_curve=curve, card_shared_by=3)
-          for s in (0, 1)]
+def _brax_table(tmp_path, rows) -> str:
+  """A Brax results file of ``rows`` on one H200, tabled alone; returns the table's path stem."""
   path = str(tmp_path / "brax.json")
   with open(path, "w") as f:
     json.dump({"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
                "rows": rows}, f)
   out = str(tmp_path / "table")
   T.main(["--task", "place_plate", "--sources", path, "--out", out])
+  return out
+
+
+def test_runs_that_shared_their_device_are_not_timed(tmp_path):
+  """rl_brax_ppo.py --shared-card N rows: scored by the mode at every evaluation, but their seconds ran beside other
+  runs, so the group's time to 80 % counts none of them and each run says why."""
+  curve = {"action": "mode", "episodes": 256, "points": []}
+  rows = [dict(_brax_row(2.0, s, (1.0, 0.95)), time_to_80_safe_s=400.0, scored_curve=curve, card_shared_by=3)
+          for s in (0, 1)]
+  out = _brax_table(tmp_path, rows)
   with open(out + ".json") as f:
     (g,) = json.load(f)["groups"]
   assert g["time_to_80_safe"]["scored"] == 0 and g["time_to_80_safe"]["shared"] == 2 and g["meet_bar"] == 2
@@ -165,13 +171,7 @@ def test_a_group_of_alone_and_shared_runs_times_the_alone_ones(tmp_path):
   curve = {"action": "mode", "episodes": 256, "points": []}
   rows = [dict(_brax_row(2.0, s, (1.0, 0.95)), time_to_80_safe_s=100.0 + s, scored_curve=curve,
                card_shared_by=3 if s < 2 else 1) for s in (0, 1, 2)]
-  path = str(tmp_path / "brax.json")
-  with open(path, "w") as f:
-    json.dump({"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
-               "rows": rows}, f)
-  out = str(tmp_path / "table")
-  T.main(["--task", "place_plate", "--sources", path, "--out", out])
-  md = open(out + ".md").read()
+  md = open(_brax_table(tmp_path, rows) + ".md").read()
   assert "| 102, 1 / 1 reached (2 not timed (device shared)) |" in md and "not scored" not in md
 
 
