@@ -176,11 +176,11 @@ def parse(argv):
                       "the paper preset always anneals)")
   p.add_argument("--paper-timesteps", type=float, default=1e7,
                  help="env steps per seed of the paper methods: their lr anneals linearly to 0 over this many")
-  p.add_argument("--target-kl-rule", default=None, choices=("minibatch", "epoch"),
+  p.add_argument("--target-kl-rule", default=None,
                  help="paper methods: how the target KL stops the epochs — minibatch (SB3: before a step whose KL "
                       "> 1.5·target; the preset's) or epoch (CleanRL: after an epoch whose last step began above "
                       "the target); train/config.py")
-  p.add_argument("--policy-std", default=None, choices=("state", "parameter"),
+  p.add_argument("--policy-std", default=None,
                  help="every method: the policy's std an output of the actor per state (brax's; the presets') or "
                       "one learned parameter per action dimension (SB3's, CleanRL's); train/config.py")
   p.add_argument("--num-envs", type=int, default=None, help="envs per seed (default: the preset's)")
@@ -240,7 +240,12 @@ def parse(argv):
                  help="with --combine: score every row by this action of its final evaluation (rows must have "
                       "scored it: --eval-actions); default: each row's own first action")
   args = p.parse_args(argv)
-  from train.networks import POLICY_ACTIONS  # after argparse: --help answers without importing JAX
+  from train.config import POLICY_STDS, TARGET_KL_RULES  # after argparse: --help answers without importing JAX
+  from train.networks import POLICY_ACTIONS
+  for flag, value, valid in (("--target-kl-rule", args.target_kl_rule, TARGET_KL_RULES),
+                             ("--policy-std", args.policy_std, POLICY_STDS)):
+    if value is not None and value not in valid:
+      p.error(f"{flag}: one of {','.join(valid)}, got {value!r}")
   if args.tag and not all(c.isalnum() or c in "_-" for c in args.tag):
     p.error(f"--tag: letters, digits, '_' and '-' only, got {args.tag!r}")
   if args.combine:

@@ -240,8 +240,9 @@ class Trainer:
     metrics = self._pmean({k: metrics[k] for k in self._loss_keys})  # one KL on every shard: they stop together
     if self.cfg.target_kl is None:
       return (new_params, new_opt, stopped), (metrics, jnp.ones(()))
-    # CleanRL's rule ("epoch") never stops inside an epoch: _epoch decides at its end.
-    stop = stopped | ((metrics["kl_update"] > 1.5 * self.cfg.target_kl) & (self.cfg.target_kl_rule == "minibatch"))
+    stop = stopped
+    if self.cfg.target_kl_rule == "minibatch":  # CleanRL's rule ("epoch") decides at an epoch's end: _epoch
+      stop = stop | (metrics["kl_update"] > 1.5 * self.cfg.target_kl)
     keep = lambda old, new: jax.tree.map(lambda a, b: jnp.where(stop, a, b), old, new)  # noqa: E731
     return (keep(params, new_params), keep(opt_state, new_opt), stop), (metrics, 1.0 - stop.astype(jnp.float32))
 
