@@ -1,0 +1,213 @@
+"""How trained Place Plate policies end their episodes, by action: placed, let go above the counter, or never let go.
+
+A Gaussian policy is trained on its samples but usually scored by its mode (tanh of the mean). Where the two
+disagree, the way the episodes end says why: a mode that never opens the fingers wide enough to let the plate go
+(it hovers with the plate in hand: nothing broken, nothing completed) fails differently from one that lets go
+too high (the plate falls and breaks). For each checkpoint policy ``FILE#SEED`` of ``--policies`` and each
+action of ``--actions``, ``--episodes`` episodes from the same resets (key ``--seed``) are stepped, and per
+episode this script finds:
+
+- *let go*: the first step at which the fingers' inner gap exceeds the plate's width by more than
+  ``--clearance`` (the pads no longer touch it) with the plate still above its resting height;
+- *release height*: the plate's centre above its resting height at that step (cm);
+- *placed*: the task's success at any step (the evaluator's completion);
+- *outcome*: "placed", "let go, not placed" (the fingers opened past the plate at some height), or "never let
+  go" (they never did: the hand kept the plate to the end);
+- *touchdown speed*: the plate's mean downward speed over the control step in which it reaches the counter;
+- the plate's final health and the lowest height the hand brought it to while holding it.
+
+Writes ``benchmarks/results/place_plate_outcomes[_<tag>].{json,md}`` with the command. Each (action, network
+shape) compiles once; the weights are data, so every checkpoint of one shape reuses the program.
+
+Usage::
+
+    PYTHONPATH=. .venv/bin/python benchmarks/place_plate_outcomes.py --episodes 64 --actions mode,sample \\
+        --policies benchmarks/results/rl_place_plate_nvidia_h200_box_3seeds_300s_b_penalty_policy.npz#2
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import types
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import mjx_damage  # noqa: E402,F401  (XLA:CPU flags and the jax compat shim before jax starts)
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import provenance  # noqa: E402  (the sibling module: the results writer)
+from apps import resolve as R  # noqa: E402
+from tasks.place_plate import PLATE_REST_Z  # noqa: E402  (the plate's centre height at rest, m)
+from train import evaluate as E  # noqa: E402
+from train import networks as N  # noqa: E402
+
+TASK = "place_plate"
+OUTCOMES = ("placed", "let go, not placed", "never let go")
+
+
+def parse(argv=None):
+  p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+  p.add_argument("--policies", required=True,
+                 help="comma-separated checkpoint files of place_plate policies, each FILE#SEED (FILE alone: its first seed)")
+  p.add_argument("--actions", default="mode,sample", help=f"comma-separated of {', '.join(N.POLICY_ACTIONS)}")
+  p.add_argument("--episodes", type=int, default=64)
+  p.add_argument("--seed", type=int, default=12345, help="episode key (resets and sampled actions)")
+  p.add_argument("--clearance", type=float, default=0.005,
+                 help="m: inner gap beyond the plate's width at which the fingers count as let go")
+  p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
+                 help="task keyword over every policy's own settings")
+  p.add_argument("--tag", default="")
+  p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
+  args = p.parse_args(argv)
+  try:  # everything checked before a task is built or compiled
+    args.specs = [s.strip() for s in args.policies.split(",") if s.strip()]
+    if not args.specs:
+      raise ValueError("policies: give at least one FILE#SEED")
+    for s in args.specs:
+      R.parse_policy_spec("checkpoint:" + s)
+    args.action_list = [a.strip() for a in args.actions.split(",") if a.strip()]
+    bad = [a for a in args.action_list if a not in N.POLICY_ACTIONS]
+    if bad or not args.action_list:
+      raise ValueError(f"actions: {', '.join(bad) or '(none)'} not among {', '.join(N.POLICY_ACTIONS)}")
+    E.check_args(args.episodes, 1.0, 95.0, seed=args.seed)
+    if not (np.isfinite(args.clearance) and 0.0 <= args.clearance < 0.05):
+      raise ValueError(f"clearance: {args.clearance!r} must be in [0, 0.05) m")
+    kwargs = {R.checkpoint_path("checkpoint:" + s): R.checkpoint_task_kwargs("checkpoint:" + s, TASK)
+              for s in args.specs}
+    if len({repr(sorted(k.items())) for k in kwargs.values()}) > 1:
+      raise ValueError(f"policies: trained with different task settings ({kwargs}); trace one setting per call")
+    args.overrides = R.task_overrides(TASK, next(iter(kwargs.values())), None, args.task_arg)
+    args.env = R.make_task(TASK, **args.overrides)
+  except ValueError as e:
+    p.error(str(e))
+  return args
+
+
+def episodes_program(env, apply, steps: int):
+  """``run(params, keys) -> (plate f32[B, T, 3] m, gap f32[B, T] m, success f32[B, T], health f32[B, N])``:
+  B episodes of ``steps`` control steps (the evaluator's key split), the weights traced."""
+  robot = env.robot  # the damage wrapper forwards the task's attributes
+
+  def one(params, key):
+    reset_key, act_key = jax.random.split(key)
+    state = env.reset(reset_key)
+
+    def body(state, t):
+      nxt = env.step(state, apply(params, state, jax.random.fold_in(act_key, t)))
+      d = nxt.pipeline_state
+      row = (env.plate_pos(d), robot.gap(types.SimpleNamespace(qpos=d.qpos)), nxt.metrics["success"])
+      return nxt, row
+
+    state, rows = jax.lax.scan(body, state, jnp.arange(steps))
+    return rows + (state.info["entity_health"],)
+
+  return jax.jit(jax.vmap(one, in_axes=(None, 0)))
+
+
+def classify(plate, gap, success, rest_z: float, width: float, clearance: float, dt: float) -> dict:
+  """Per-episode outcome from a trace (numpy, time-major [T, B]; ``dt`` s per control step); see the module
+  docstring. Touchdown speed: the plate's mean downward speed over the control step in which it first comes
+  within 2 mm of its resting height (m/s; NaN if it never does)."""
+  placed = success.max(0) > 0
+  above = plate[..., 2] > rest_z + 0.002
+  open_ = gap > width + clearance
+  let_go = open_ & above
+  released = let_go.any(0)
+  first = np.where(released, let_go.argmax(0), -1)
+  n = np.arange(plate.shape[1])
+  height = np.where(released, plate[np.maximum(first, 0), n, 2] - rest_z, np.nan)
+  held_low = np.where(~open_, plate[..., 2], np.inf).min(0) - rest_z
+  # never let go: the fingers never opened past the plate (at any height), so the hand held it to the end
+  outcome = np.where(placed, 0, np.where(open_.any(0), 1, 2))
+  down = plate[..., 2] < rest_z + 0.002
+  touched = down.any(0)
+  k = down.argmax(0)
+  z_before = plate[np.maximum(k - 1, 0), n, 2]
+  speed = np.where(touched & (k > 0), (z_before - plate[k, n, 2]) / dt, np.nan)
+  return {"outcome": outcome, "release_height_m": height, "release_step": first, "held_low_m": held_low,
+          "touchdown_speed_m_s": speed}
+
+
+def summarise(c: dict, plate_health: np.ndarray) -> dict:
+  out = c["outcome"]
+  h = c["release_height_m"]
+  frac = {name: float((out == i).mean()) for i, name in enumerate(OUTCOMES)}
+  rel = np.isfinite(h)
+  never = out == 2
+  v = c["touchdown_speed_m_s"]
+  tv = np.isfinite(v)
+  return {"fractions": frac,
+          "release_height_cm_median": float(np.median(h[rel]) * 100) if rel.any() else None,
+          "release_height_cm_p90": float(np.percentile(h[rel], 90) * 100) if rel.any() else None,
+          "never_let_go_held_at_cm_median": float(np.median(c["held_low_m"][never]) * 100) if never.any() else None,
+          "touchdown_speed_m_s_median": float(np.median(v[tv])) if tv.any() else None,
+          "touchdown_speed_m_s_p90": float(np.percentile(v[tv], 90)) if tv.any() else None,
+          "plate_health_mean": float(plate_health.mean()),
+          "plate_intact_rate": float((plate_health > 95.0).mean())}
+
+
+def render_md(res: dict) -> str:
+  lines = [f"# How trained Place Plate policies end their episodes, by action", "",
+           f"Date: {res['date']}. Git: {res['git']}. jax {res['jax']} ({res['backend']}). {res['episodes']} episodes "
+           f"per policy and action from the same resets (key {res['seed']}); task settings {res['task_kwargs']}. "
+           f"Let go: the fingers' inner gap exceeds the plate's width + {100 * res['clearance']:g} cm with the plate "
+           "above its resting height; release height: the plate's centre above rest at that step; never let go: "
+           "held to the end of the episode (held at: the lowest the hand brought it, above rest). Touchdown speed: "
+           "the plate's mean downward speed over the control step in which it first comes within 2 mm of rest. "
+           "Intact: plate health > 95.", "", f"Command: `{res['command']}`", "",
+           "| policy | seed | action | placed | let go, not placed | never let go | release height, median (p90) cm "
+           "| never let go: held at, median cm | touchdown speed, median (p90) m/s | plate intact |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+  for r in res["rows"]:
+    s = r["summary"]
+    f = s["fractions"]
+    rh = ("—" if s["release_height_cm_median"] is None
+          else f"{s['release_height_cm_median']:.1f} ({s['release_height_cm_p90']:.1f})")
+    nh = "—" if s["never_let_go_held_at_cm_median"] is None else f"{s['never_let_go_held_at_cm_median']:.1f}"
+    tv = ("—" if s["touchdown_speed_m_s_median"] is None
+          else f"{s['touchdown_speed_m_s_median']:.2f} ({s['touchdown_speed_m_s_p90']:.2f})")
+    lines.append(f"| {os.path.basename(r['file'])} | {r['seed']} | {r['action']} | {100 * f['placed']:.1f} % | "
+                 f"{100 * f['let go, not placed']:.1f} % | {100 * f['never let go']:.1f} % | {rh} | {nh} | {tv} | "
+                 f"{100 * s['plate_intact_rate']:.1f} % |")
+  return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+  args = parse(argv)
+  env = args.env
+  steps = R.episode_length_of(env, TASK)
+  plate_entity = list(env.entity_names).index("plate")
+  keys = jax.random.split(jax.random.PRNGKey(args.seed), args.episodes)
+  programs: dict = {}
+  res = {"task": TASK, "episodes": args.episodes, "seed": args.seed, "clearance": args.clearance,
+         "task_kwargs": args.overrides, "rows": []}
+  for spec in args.specs:
+    for action in args.action_list:
+      policy = R.make_policy(f"checkpoint{'' if action == 'mode' else '+' + action}:{spec}", env)
+      shape = (action, repr(jax.tree.map(lambda x: (x.shape, str(x.dtype)), policy.params)))
+      if shape not in programs:  # one compile per (action, network shape); the weights are an argument
+        programs[shape] = episodes_program(env, policy.apply, steps)
+      plate, gap, success, health = jax.device_get(programs[shape](policy.params, keys))
+      # the program is episode-major [B, T, ...]; classify reads time-major [T, B, ...]
+      plate, gap, success = (np.swapaxes(np.asarray(x), 0, 1) for x in (plate, gap, success))
+      c = classify(plate, gap, success, PLATE_REST_Z,
+                   2 * float(env.plate_half_y), args.clearance, float(env.dt))
+      ph = np.asarray(health)[:, plate_entity]
+      row = {"file": R.checkpoint_path("checkpoint:" + spec), "seed": policy.seed, "action": action,
+             "summary": summarise(c, ph), "outcome_per_episode": c["outcome"].tolist()}
+      res["rows"].append(row)
+      f = row["summary"]["fractions"]
+      print(f"{os.path.basename(row['file'])}#{policy.seed} {action}: " +
+            ", ".join(f"{k} {100 * v:.1f} %" for k, v in f.items()), flush=True)
+  stem = os.path.join(args.results_dir, "place_plate_outcomes" + (f"_{args.tag}" if args.tag else ""))
+  provenance.save_results(res, "place_plate_outcomes", argv, stem, render_md)
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
