@@ -42,6 +42,7 @@ import numpy as np  # noqa: E402
 
 import provenance  # noqa: E402  (the sibling module: the results writer)
 from apps import resolve as R  # noqa: E402
+from mjx_damage import warp_step  # noqa: E402
 from tasks.place_plate import PLATE_REST_Z  # noqa: E402  (the plate's centre height at rest, m)
 from train import evaluate as E  # noqa: E402
 from train import networks as N  # noqa: E402
@@ -97,13 +98,15 @@ def episodes_program(env, apply, steps: int):
     reset_key, act_key = jax.random.split(key)
     state = env.reset(reset_key)
 
-    def body(state, t):
+    def body(carry, t):
+      state, done = carry
       nxt = env.step(state, apply(params, state, jax.random.fold_in(act_key, t)))
-      d = nxt.pipeline_state
-      row = (env.plate_pos(d), robot.gap(types.SimpleNamespace(qpos=d.qpos)), nxt.metrics["success"])
-      return nxt, row
+      state = warp_step.freeze(done > 0, state, nxt)  # as train.evaluate: an ended episode keeps its final state
+      d = state.pipeline_state
+      row = (env.plate_pos(d), robot.gap(types.SimpleNamespace(qpos=d.qpos)), state.metrics["success"])
+      return (state, jnp.maximum(done, nxt.done)), row
 
-    state, rows = jax.lax.scan(body, state, jnp.arange(steps))
+    (state, _), rows = jax.lax.scan(body, (state, jnp.zeros((), state.done.dtype)), jnp.arange(steps))
     return rows + (state.info["entity_health"],)
 
   return jax.jit(jax.vmap(one, in_axes=(None, 0)))
