@@ -55,7 +55,10 @@ reward), with CleanRL's target-KL rule and the std a parameter (docs/safe_rl.md,
 
 ``--anneal-lr --timesteps N``: the learning rate (1e-3 in the playground preset) decays linearly to 0 over
 N env steps per seed instead of staying constant (the paper preset always anneals); for long runs whose
-late iterates collapse (docs/rl_task_design.md, Pick Egg's penalty phase).
+late iterates collapse (docs/rl_task_design.md, Pick Egg's penalty phase). ``--anneal-entropy --timesteps N``:
+the entropy coefficient (0.02) decays linearly to 0 over N env steps per seed, so that by the end PPO no longer
+pays for the policy's noise (docs/safe_rl.md, "How the failures end": a mode that stops short of what its
+samples do).
 
 CPU plumbing check (learns nothing)::
 
@@ -134,6 +137,9 @@ def method_spec(name: str, args) -> dict:
   if args.anneal_lr and spec["preset"] != "paper":  # the paper preset anneals already
     spec = dict(spec, label=spec["label"] + f", lr annealed to 0 over {args.timesteps:.3g} steps",
                 anneal_learning_rate=True)
+  if args.anneal_entropy and spec["preset"] != "paper":  # the paper preset has no entropy term to anneal
+    spec = dict(spec, label=spec["label"] + f", entropy annealed to 0 over {args.timesteps:.3g} steps",
+                anneal_entropy=True)
   if args.target_kl_rule is not None and spec["preset"] == "paper":  # the only preset with a target KL
     spec = dict(spec, label=spec["label"] + f", target-KL rule {args.target_kl_rule}",
                 target_kl_rule=args.target_kl_rule)
@@ -174,6 +180,9 @@ def parse(argv):
   p.add_argument("--anneal-lr", action="store_true",
                  help="non-paper methods: the learning rate decays linearly to 0 over --timesteps (give it too; "
                       "the paper preset always anneals)")
+  p.add_argument("--anneal-entropy", action="store_true",
+                 help="non-paper methods: the entropy coefficient decays linearly to 0 over --timesteps (give it "
+                      "too), so the policy's noise is no longer paid for by the end")
   p.add_argument("--paper-timesteps", type=float, default=1e7,
                  help="env steps per seed of the paper methods: their lr anneals linearly to 0 over this many")
   p.add_argument("--target-kl-rule", default=None,
@@ -269,6 +278,8 @@ def parse(argv):
     p.error(f"--timesteps: env steps per seed, a number >= 1, got {args.timesteps}")
   if args.anneal_lr and args.timesteps is None:
     p.error("--anneal-lr: the rate decays to 0 over --timesteps; give --timesteps (env steps per seed) too")
+  if args.anneal_entropy and args.timesteps is None:
+    p.error("--anneal-entropy: the coefficient decays to 0 over --timesteps; give --timesteps (env steps per seed) too")
   args.timesteps = 1e9 if args.timesteps is None else args.timesteps
   try:
     args.pid_gains = tuple(float(x) for x in args.pid_gains.split(","))

@@ -175,6 +175,17 @@ def test_anneal_lr_reaches_the_playground_methods_and_names_its_horizon():
   assert plain.timesteps == 1e9 and "anneal_learning_rate" not in rl_multiseed.method_spec("penalty", plain)
 
 
+def test_anneal_entropy_reaches_the_playground_methods_and_needs_a_horizon(capsys):
+  a = rl_multiseed.parse(["--methods", "task_only,penalty,paper", "--anneal-entropy", "--timesteps", "1.1e7"])
+  for m in ("task_only", "penalty"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert spec["anneal_entropy"] is True and "entropy annealed to 0 over 1.1e+07 steps" in spec["label"]
+  assert "anneal_entropy" not in rl_multiseed.method_spec("paper", a)  # no entropy term in the paper preset
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(["--methods", "penalty", "--anneal-entropy"])
+  assert "--anneal-entropy: the coefficient decays to 0 over --timesteps" in capsys.readouterr().err
+
+
 def test_target_kl_rule_reaches_the_paper_methods_only():
   a = rl_multiseed.parse(["--methods", "paper,paper_task_only,penalty", "--target-kl-rule", "epoch"])
   for m in ("paper", "paper_task_only"):

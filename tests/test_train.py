@@ -229,6 +229,28 @@ def test_damage_schedule_run(env, tmp_path):
   assert by_it == {0: {0.0}, 1: {0.0}, 2: {0.0}, 3: {1.0}, 4: {2.0}, 5: {2.0}, 6: {2.0}}, by_it
 
 
+def test_annealed_entropy():
+  """The entropy anneal: the configured coefficient at the first iteration, linear to 0 at the run's end, 0 after."""
+  np.testing.assert_allclose(ppo.annealed_entropy(0.02, jnp.arange(6), 4), [0.02, 0.015, 0.01, 0.005, 0.0, 0.0])
+
+
+def test_entropy_anneal_run(env):
+  """``anneal_entropy``: the first iteration trains exactly as without it (same coefficient); from then on the
+  entropy term carries the annealed coefficient (its logged loss ≈ 3/4, then 1/2 of the constant run's, the
+  policies' entropies barely apart after a few small steps). Non-bool values are refused."""
+  kw = dict(seed=0, num_timesteps=4 * ITER, eval_every=ITER, **TINY)
+  const = train.train(env, **kw).history
+  anneal = train.train(env, anneal_entropy=True, **kw)
+  assert anneal.config.anneal_entropy
+  a = anneal.history
+  assert a[0]["loss/entropy_loss"] == const[0]["loss/entropy_loss"] and a[0]["loss/policy_loss"] == const[0]["loss/policy_loss"]
+  for i, frac in ((1, 0.75), (2, 0.5), (3, 0.25)):
+    assert a[i]["loss/entropy_loss"] / const[i]["loss/entropy_loss"] == pytest.approx(frac, rel=0.05), i
+  with pytest.raises(ValueError, match="^anneal_entropy:"):
+    train.PPOConfig(anneal_entropy=1).validate()
+  assert train.PPOConfig.from_json({}).anneal_entropy is False  # runs from before: a constant coefficient
+
+
 @pytest.mark.parametrize("kwargs,name", [
     (dict(budget=-1.0), "budget"),
     (dict(damage_warmup_steps=-1, damage_weight=2.0), "damage_warmup_steps"),
@@ -271,9 +293,10 @@ def test_cli_errors_and_flags(capsys):
   assert "budget:" in capsys.readouterr().err
   args, config = cli.split_args(vars(cli.build_parser().parse_args(
       ["--task", "t", "--out", "o", "--seeds", "0,1,2", "--preset", "paper", "--multiplier", "pid",
-       "--init-log-std=-0.5,-1.5", "--timesteps", "1e6"])))
+       "--init-log-std=-0.5,-1.5", "--timesteps", "1e6", "--anneal-entropy", "true"])))
   assert args["seeds"] == (0, 1, 2) and args["preset"] == "paper"
-  assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000}
+  assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000,
+                    "anneal_entropy": True}
 
 
 def test_train_evaluate_is_the_module():

@@ -117,6 +117,7 @@ CONFIG_FLAGS = (
     ("--gamma", "discounting", float, None),
     ("--gae-lambda", "gae_lambda", float, None),
     ("--entropy", "entropy_cost", float, None),
+    ("--anneal-entropy", "anneal_entropy", _bool, "true: the entropy coefficient decays linearly to 0 over --timesteps"),
     ("--value-cost", "value_cost", float, "weight of the value loss"),
     ("--reward-scaling", "reward_scaling", float, None),
     ("--max-grad-norm", "max_grad_norm", float, "per-network gradient-norm clip"),

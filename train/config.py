@@ -76,6 +76,10 @@ class PPOConfig:
   discounting: float = 0.97
   gae_lambda: float = 0.95
   entropy_cost: float = 2e-2
+  # True: the entropy coefficient decays linearly from entropy_cost to 0 over num_timesteps (per
+  # iteration, as anneal_learning_rate does the rate), so the policy's noise is no longer paid for by the
+  # end and its mode and its samples can come together (docs/safe_rl.md, "How the failures end").
+  anneal_entropy: bool = False
   value_cost: float = 0.5  # brax's PPO loss weights the value term by 0.5 (the paper's coefficient)
   reward_scaling: float = 1.0
   max_grad_norm: Optional[float] = 1.0
@@ -262,7 +266,7 @@ class PPOConfig:
       raise ValueError(f"budget_anneal_steps: must be an integer >= 0 (env steps per seed), got {v!r}")
     if v and self.budget is None:
       raise ValueError("budget_anneal_steps: anneals the Lagrangian's budget; set budget too (got budget=None)")
-    for name in ("cost_critic", "update_normalizer", "normalizer_after_update"):
+    for name in ("cost_critic", "update_normalizer", "normalizer_after_update", "anneal_entropy"):
       if not isinstance(getattr(self, name), bool):
         raise ValueError(f"{name}: true or false, got {getattr(self, name)!r}")
     if self.multiplier not in MULTIPLIERS:
@@ -298,7 +302,7 @@ class PPOConfig:
     old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
            "value_cost": 0.5, "budget_anneal_steps": 0,
            "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False,
-           "target_kl_rule": "minibatch", "policy_std": "state"}
+           "target_kl_rule": "minibatch", "policy_std": "state", "anneal_entropy": False}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

@@ -97,6 +97,12 @@ class TrainState:
     return self.multiplier.lam
 
 
+def annealed_entropy(entropy_cost: float, iteration, num_iterations: int):
+  """Entropy coefficient at ``iteration`` (i32[]) of a run of ``num_iterations``: linear from ``entropy_cost``
+  at the first iteration to 0 at the last one's end, and 0 after (a run stopped by time ends earlier)."""
+  return entropy_cost * jnp.clip(1.0 - iteration.astype(jnp.float32) / num_iterations, 0.0, 1.0)
+
+
 def scheduled_weight(damage_weight, iteration, warmup, ramp):
   """w at ``iteration`` (i32[]) of the penalty schedule (config ``damage_warmup_steps``/``damage_ramp_steps``,
   in iterations): 0 before ``warmup``, then linear up to ``damage_weight`` over ``ramp`` iterations."""
@@ -230,7 +236,8 @@ class Trainer:
     the target and would stop the epochs before the first step (it did: issue 24's paper-preset runs
     took 0–1 of their 80 steps per iteration). SB3's rule, whose observations are normalised when
     collected, measures the same thing as this one.
-    ``weights``: (w, λ) f32[] each, what the cost critic's loss mixes the advantages with."""
+    ``weights``: (w, λ, entropy coefficient): w and λ (f32[] each) are what the cost critic's loss mixes the
+    advantages with."""
     params, opt_state, stopped = carry
     mb, key = inp
     (_, metrics), new_params, new_opt = self.gradient_update(params, normalizer, mb, key, *weights,
@@ -277,7 +284,7 @@ class Trainer:
     """Normaliser update, then ``num_updates_per_batch`` epochs on ``data`` [R·E, T] (brax's order; with
     ``normalizer_after_update`` the epochs see the rollout's statistics); the cost critic's loss mixes
     with the state's w and λ (the λ the data was collected under)."""
-    weights = (self.damage_weight(ts), ts.multiplier.lam)
+    weights = (self.damage_weight(ts), ts.multiplier.lam, self.entropy_cost(ts))
     key, k_sgd = jax.random.split(ts.rng)
     normalizer = ts.normalizer
     if self.cfg.normalize_observations and self.cfg.update_normalizer:
@@ -310,6 +317,13 @@ class Trainer:
     if not (warmup or ramp):
       return ts.damage_weight
     return scheduled_weight(ts.damage_weight, ts.iteration, warmup, ramp)
+
+  def entropy_cost(self, ts: TrainState):
+    """The entropy coefficient of this iteration: the config's (a constant) or, with ``anneal_entropy``,
+    :func:`annealed_entropy` of it (f32[])."""
+    if not self.cfg.anneal_entropy:
+      return self.cfg.entropy_cost
+    return annealed_entropy(self.cfg.entropy_cost, ts.iteration, self.cfg.num_iterations)
 
   def train_iteration(self, ts: TrainState):
     """``(TrainState) -> (TrainState, metrics: dict of f32[])`` for one seed."""

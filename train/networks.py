@@ -145,25 +145,27 @@ def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
 
 
 def make_gradient_update(network, optimizer, cfg: PPOConfig, axis_name: Optional[str] = None):
-  """``update(params, normalizer, minibatch [B, T], key, w, λ, optimizer_state=...) -> ((loss, metrics), params,
-  opt_state)``.
+  """``update(params, normalizer, minibatch [B, T], key, w, λ, entropy_cost, optimizer_state=...) -> ((loss, metrics),
+  params, opt_state)``.
 
   Without a cost critic the minibatch's reward is already shaped with w and λ (train.iteration) and
   brax's loss ignores them; with one (``cfg.cost_critic``) the reward is the task reward and
   train.constrained_loss mixes the two advantages with w and λ. ``axis_name``: gradients are averaged
-  over this mesh axis (train.mesh) before the optimizer step.
+  over this mesh axis (train.mesh) before the optimizer step. ``entropy_cost``: the entropy coefficient of
+  this update (the config's, or its anneal: train.iteration).
   """
-  common = dict(ppo_network=network, entropy_cost=cfg.entropy_cost, discounting=cfg.discounting,
+  common = dict(ppo_network=network, discounting=cfg.discounting,
                 reward_scaling=cfg.reward_scaling, gae_lambda=cfg.gae_lambda,
                 clipping_epsilon=cfg.clipping_epsilon, vf_coefficient=cfg.value_cost)
   if cfg.cost_critic:
-    loss_fn = functools.partial(CL.compute_loss, **common)
+    def loss_fn(params, normalizer, data, rng, cost_weight, lam, entropy_cost):
+      return CL.compute_loss(params, normalizer, data, rng, cost_weight, lam, entropy_cost=entropy_cost, **common)
   else:
     brax_loss = functools.partial(ppo_losses.compute_ppo_loss, normalize_advantage=True, **common)
 
-    def loss_fn(params, normalizer, data, rng, cost_weight, lam):
+    def loss_fn(params, normalizer, data, rng, cost_weight, lam, entropy_cost):
       del cost_weight, lam  # already in data.reward
-      return brax_loss(params, normalizer, data, rng)
+      return brax_loss(params, normalizer, data, rng, entropy_cost=entropy_cost)
 
   return gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=axis_name, has_aux=True)
 

@@ -44,7 +44,7 @@ from train import distributed
 from train import mesh as M
 from train.config import RESUMABLE_CHANGES, PPOConfig
 from train.envs import recorded_task_kwargs, resolve_task, safe_threshold_of, task_episode_length  # noqa: F401
-from train.iteration import Trainer, TrainState, scheduled_weight, shape_reward  # noqa: F401
+from train.iteration import Trainer, TrainState, annealed_entropy, scheduled_weight, shape_reward  # noqa: F401
 from train.multipliers import lagrange_update  # noqa: F401
 from train.policy import load_policy  # noqa: F401
 
