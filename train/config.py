@@ -78,7 +78,8 @@ class PPOConfig:
   entropy_cost: float = 2e-2
   # True: the entropy coefficient decays linearly from entropy_cost to 0 over num_timesteps (per
   # iteration, as anneal_learning_rate does the rate), so the policy's noise is no longer paid for by the
-  # end and its mode and its samples can come together (docs/safe_rl.md, "How the failures end").
+  # end and its mode and its samples can come together (docs/safe_rl.md, "How the failures end": tried on
+  # Place Plate, it did not remove the mode's failures there).
   anneal_entropy: bool = False
   value_cost: float = 0.5  # brax's PPO loss weights the value term by 0.5 (the paper's coefficient)
   reward_scaling: float = 1.0
