@@ -121,9 +121,8 @@ def classify(plate, gap, success, rest_z: float, width: float, clearance: float,
   open_ = gap > width + clearance
   let_go = open_ & above
   released = let_go.any(0)
-  first = np.where(released, let_go.argmax(0), -1)
   n = np.arange(plate.shape[1])
-  height = np.where(released, plate[np.maximum(first, 0), n, 2] - rest_z, np.nan)
+  height = np.where(released, plate[let_go.argmax(0), n, 2] - rest_z, np.nan)
   held_low = np.where(~open_, plate[..., 2], np.inf).min(0) - rest_z
   # never let go: the fingers never opened past the plate (at any height), so the hand held it to the end
   outcome = np.where(placed, 0, np.where(open_.any(0), 1, 2))
@@ -132,7 +131,7 @@ def classify(plate, gap, success, rest_z: float, width: float, clearance: float,
   k = down.argmax(0)
   z_before = plate[np.maximum(k - 1, 0), n, 2]
   speed = np.where(touched & (k > 0), (z_before - plate[k, n, 2]) / dt, np.nan)
-  return {"outcome": outcome, "release_height_m": height, "release_step": first, "held_low_m": held_low,
+  return {"outcome": outcome, "release_height_m": height, "held_low_m": held_low,
           "touchdown_speed_m_s": speed}
 
 
