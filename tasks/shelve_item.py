@@ -28,6 +28,10 @@ bottom 2–10 cm above the shelf top (0.12–0.20 m): in front of the shelf,
 roughly in line with the slot, below the glass's top (0.24 m). ``start="above_glass"``
 (default ``"in_front"``): the same x and y, bottom 3–7 cm over the glass's top (0.27–0.31 m), the
 careful route's climb already done (docs/rl_task_design.md, "Shelve Item from above the glass").
+``start="route"``, a start distribution for training (evaluate from ``in_front``): a quarter of the
+episodes start as ``in_front``, the rest at a uniform point of the careful route (the climb, the crossing
+over the glass, or the descent into the slot down to 5–20 mm over the shelf; :func:`route_start`), the
+box in hand (docs/rl_task_design.md, "Shelve Item: starts along the careful route").
 
 Success (per step): the cereal box rests upright on the shelf (bottom within
 3 mm of the shelf top, speed < 5 cm/s) with its centre within 3 cm (xy) of the
@@ -97,7 +101,15 @@ IN_HAND_LO, IN_HAND_HI = (-0.06, -0.05, SHELF_TOP + 0.02), (0.02, 0.05, SHELF_TO
 # start="above_glass": the same box-centre x and y, box bottom 3-7 cm above the glass's top (the safe carry's height
 # and up to 4 cm above it): the climb is done, and what is left to decide is where to come down
 ABOVE_GLASS_LO, ABOVE_GLASS_HI = (-0.06, -0.05, GLASS_TOP + 0.03), (0.02, 0.05, GLASS_TOP + 0.07)
-STARTS = {"in_front": (IN_HAND_LO, IN_HAND_HI), "above_glass": (ABOVE_GLASS_LO, ABOVE_GLASS_HI)}
+# start="route" (a training start distribution, docs/rl_task_design.md "Shelve Item: starts along the careful
+# route"): a quarter of the episodes start as "in_front", the others at a point drawn uniformly on one of the careful
+# route's three legs: the climb (in front of the glass, up to ABOVE_GLASS height), the crossing (over the glass to
+# above the slot) and the descent (above the slot down to ROUTE_END_BOTTOM over the shelf). Every point of it is
+# clear of the glass and the bottles.
+ROUTE_END_BOTTOM = (SHELF_TOP + 0.005, SHELF_TOP + 0.02)  # m, box-bottom height where the descent leg ends
+ROUTE_SLOT_JITTER = 0.01  # m, per axis (x, y): the crossing's and descent's box centre around the slot's
+ROUTE_DEFAULT_SHARE = 0.25  # share of "route" episodes that start as "in_front" (the evaluation's own start)
+STARTS = {"in_front": (IN_HAND_LO, IN_HAND_HI), "above_glass": (ABOVE_GLASS_LO, ABOVE_GLASS_HI), "route": None}
 # dense distance term: "euclidean" −2·‖box − slot‖; "axes" −2·(‖xy‖ + |z|), which pays for closing the horizontal
 # gap at the same rate at every height (the Euclidean term's pull along x fades while the box is high above the slot)
 DISTANCES = ("euclidean", "axes")
@@ -115,6 +127,31 @@ NEIGHBOURS = ("wineglass", "bottle_of_wine", "bottle_of_beer")
 NEIGHBOUR_POSE = {"wineglass": (GLASS_DX, 0.0, SHELF_TOP + GLASS_HALF[2]),
                   "bottle_of_wine": (0.0, 0.14, SHELF_TOP + 0.13),
                   "bottle_of_beer": (0.0, -0.14, SHELF_TOP + 0.10)}
+
+
+def route_start(rng, ys):
+  """Box centre f32[3] (world, m) of a ``start="route"`` episode whose slot is at y = ``ys``.
+
+  With probability ROUTE_DEFAULT_SHARE the ``in_front`` draw; otherwise one of the careful route's legs,
+  chosen uniformly, at a uniform fraction of its length: climb A→B, crossing B→C, descent C→D, where A is
+  the ``in_front`` draw, B the same x, y at the ``above_glass`` height, C above the slot at B's height and
+  D in the slot with the bottom ROUTE_END_BOTTOM over the shelf (C, D jittered by ROUTE_SLOT_JITTER).
+  """
+  k = jax.random.split(rng, 6)
+  lift = jnp.array([0.0, ys, BOX_HALF[2]])
+  a = jax.random.uniform(k[0], (3,), minval=jnp.array(IN_HAND_LO), maxval=jnp.array(IN_HAND_HI)) + lift
+  b_bottom = jax.random.uniform(k[1], (), minval=ABOVE_GLASS_LO[2], maxval=ABOVE_GLASS_HI[2])
+  b = a.at[2].set(b_bottom + BOX_HALF[2])
+  slot_xy = jnp.array([SLOT_X, 0.0]) + jnp.stack([0.0, ys]) + jax.random.uniform(
+      k[2], (2,), minval=-ROUTE_SLOT_JITTER, maxval=ROUTE_SLOT_JITTER)
+  c = jnp.concatenate([slot_xy, b[2:]])
+  d_bottom = jax.random.uniform(k[3], (), minval=ROUTE_END_BOTTOM[0], maxval=ROUTE_END_BOTTOM[1])
+  d = jnp.concatenate([slot_xy, (d_bottom + BOX_HALF[2])[None]])
+  leg = jax.random.randint(k[4], (), 0, 3)
+  t = jax.random.uniform(k[5], (2,))
+  lo, hi = jnp.stack([a, b, c])[leg], jnp.stack([b, c, d])[leg]
+  on_route = lo + t[0] * (hi - lo)
+  return jnp.where(t[1] < ROUTE_DEFAULT_SHARE, a, on_route)
 
 
 class ShelveItem(Task):
@@ -175,11 +212,14 @@ class ShelveItem(Task):
     return d.qpos[q : q + 3]
 
   def sample_init(self, rng, qpos):
-    k = jax.random.split(rng, 3)
+    k = jax.random.split(rng, 4)
     ys = jax.random.uniform(k[0], (), minval=-0.05, maxval=0.05)
-    # the box in hand in front of the shelf, somewhat above the shelf top, roughly in line with the slot
-    lo, hi = (jnp.array(v) for v in STARTS[self.start])
-    box = jax.random.uniform(k[1], (3,), minval=lo, maxval=hi) + jnp.stack([0.0, ys, BOX_HALF[2]])
+    if self.start == "route":
+      box = route_start(k[1], ys)
+    else:
+      # the box in hand in front of the shelf, somewhat above the shelf top, roughly in line with the slot
+      lo, hi = (jnp.array(v) for v in STARTS[self.start])
+      box = jax.random.uniform(k[1], (3,), minval=lo, maxval=hi) + jnp.stack([0.0, ys, BOX_HALF[2]])
     glass_dy = jax.random.uniform(k[2], (), minval=-0.01, maxval=0.01)
     # fingers on the box's sides; reset() servos them to the squeezing grip the policies carry with
     qpos = self.robot.home(qpos, box + jnp.array([0.0, 0.0, self.grip_dz]), self.box_half_y + R.FINGER_HALF_THICK)

@@ -176,6 +176,48 @@ def test_shelve_item_start_knob():
   assert (boxes["in_front"][:, 2] - S.BOX_HALF[2] < S.GLASS_TOP).all()  # the default start: below the glass's top
 
 
+def _overlap(c1, h1, c2, h2):
+  """Axis-aligned boxes (centres f[N, 3], half sizes f[3]) overlap, per row."""
+  return np.all(np.abs(c1 - c2) < np.asarray(h1) + np.asarray(h2), axis=-1)
+
+
+def test_shelve_item_route_start():
+  """``start="route"``: about a quarter of the episodes start as ``in_front``, the rest on the careful route
+  (climb, crossing, descent); every start holds the box clear of the glass and the bottles, no higher than the
+  above-glass start, and the descent's starts lie behind the glass, down to 5 mm over the shelf."""
+  from tasks import shelve_item as S
+  n = 512
+  rngs = jax.random.split(jax.random.PRNGKey(5), n)
+  env = tasks.make("shelve_item", start="route")
+  task = env.unwrapped
+  d = jax.jit(jax.vmap(env.reset))(rngs).pipeline_state
+  pos = {k: np.asarray(jax.vmap(lambda x, k=k: task.pos(x, k))(d)) for k in ("cereal_box",) + S.NEIGHBOURS}
+  box = pos["cereal_box"]
+  half_box = (S.BOX_HALF[0], task.box_half_y, S.BOX_HALF[2])
+  assert not _overlap(box, half_box, pos["wineglass"], S.GLASS_HALF).any()
+  for bottle in ("bottle_of_wine", "bottle_of_beer"):  # 7 × 7 cm, at most 26 cm tall
+    assert not _overlap(box, half_box, pos[bottle], (0.035, 0.035, 0.13)).any()
+  bottom = box[:, 2] - S.BOX_HALF[2]
+  assert bottom.max() < S.ABOVE_GLASS_HI[2] + 1e-3 and bottom.min() > S.SHELF_TOP + 0.004
+  slot_y = pos["wineglass"][:, 1]  # the glass stands within 1 cm of the slot's y
+  in_front = ((box[:, 0] >= S.IN_HAND_LO[0] - 1e-4) & (box[:, 0] <= S.IN_HAND_HI[0] + 1e-4)
+              & (bottom <= S.IN_HAND_HI[2] + 1e-4))
+  assert 0.2 < in_front.mean() < 0.45, in_front.mean()  # the default share plus the climb's low part
+  behind = box[:, 0] - S.BOX_HALF[0] > pos["wineglass"][:, 0] + S.GLASS_HALF[0]
+  low_behind = behind & (bottom < S.GLASS_TOP)  # on the descent, below the glass's top
+  assert 0.1 < low_behind.mean() < 0.3, low_behind.mean()
+  assert (np.abs(box[low_behind, 1] - slot_y[low_behind]) < 0.025).all()
+  for start in ("in_front", "above_glass"):  # the other starts draw as before
+    assert tasks.make("shelve_item", start=start).unwrapped.start == start
+
+
+@pytest.mark.slow
+def test_shelve_item_route_start_scripted_safe_completes():
+  """From the route's starts the scripted careful policy still completes safely (64 episodes: 100 %, 100 %)."""
+  r = run_policies("shelve_item", {**tasks.RL_SETTINGS["shelve_item"], "start": "route"}, episodes=32)
+  assert r["safe"]["completion"] >= 0.95 and r["safe"]["safe_completion"] >= 0.9, r["safe"]
+
+
 def test_shelve_item_distance_knob():
   """``distance`` is validated before anything compiles; ``axes`` pays −2·(‖xy‖ + |z|) of the box's error."""
   for bad in ("l1", "", None, 1, ["axes"]):
