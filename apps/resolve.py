@@ -292,7 +292,9 @@ def policy_task_kwargs(policy_spec: str, task: str) -> dict:
 
 
 def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
-  """Task overrides a checkpoint was trained with (its obs_mode …), so the env matches the policy."""
+  """Task overrides a checkpoint's policy runs with (its obs_mode …), so the env matches the policy: those its
+  run was evaluated with where it recorded them (``eval_task_kwargs``: trained from a wider start
+  distribution, scored from the task's own, e.g. Shelve Item's ``start="route"``), else its training ones."""
   path = checkpoint_path(policy_spec)
   file = ckpt.file_of(path)
   try:
@@ -301,5 +303,6 @@ def checkpoint_task_kwargs(policy_spec: str, task: str) -> dict:
     raise ValueError(f"policy: cannot read checkpoint {file!r} ({e})") from e
   if meta.get("task") not in (None, task):
     raise ValueError(f"policy: checkpoint {path!r} was trained on task {meta['task']!r}, not {task!r}")
-  return tasks.stored_kwargs(task, meta.get("task_kwargs"))  # an older checkpoint names no robot: the gripper
+  kwargs = meta.get("eval_task_kwargs") or meta.get("task_kwargs")
+  return tasks.stored_kwargs(task, kwargs)  # an older checkpoint names no robot: the gripper
 

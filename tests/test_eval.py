@@ -286,6 +286,16 @@ def test_policy_task_kwargs_are_the_checkpoints(tmp_path):
     resolve.policy_task_kwargs(f"checkpoint:{run}", "pick_egg")
 
 
+def test_policy_task_kwargs_are_the_evaluation_settings_where_a_run_recorded_them(tmp_path):
+  """A run trained from a wider start and evaluated from the task's own (train's eval_task_kwargs) is run,
+  by eval, render and the re-scorers, from the start it was evaluated on."""
+  from train import checkpoint as ckpt
+  path = str(tmp_path / "checkpoint.npz")
+  ckpt.save(path, {}, {}, {"task": "shelve_item", "task_kwargs": {"robot": "gripper", "start": "route"},
+                           "eval_task_kwargs": {"robot": "gripper", "start": "in_front"}})
+  assert resolve.policy_task_kwargs(f"checkpoint:{path}", "shelve_item") == {"robot": "gripper", "start": "in_front"}
+
+
 @pytest.mark.parametrize("cli", ["eval", "record"])
 def test_eval_and_record_build_the_env_the_checkpoint_was_trained_on(tmp_path, cli, capsys):
   """They read the checkpoint's task before building anything: one of another task is refused by name."""

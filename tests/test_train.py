@@ -269,12 +269,36 @@ def test_entropy_anneal_run(env):
     (dict(no_such_field=1), "no_such_field"),
     (dict(resume=True), "resume"),
     (dict(time_limit=-5), "time_limit"),
+    (dict(eval_task_kwargs={"no_such_keyword": 1}), "eval_task_kwargs"),
+    (dict(eval_task_kwargs="tol=10"), "eval_task_kwargs"),
 ])
 def test_invalid_arguments(kwargs, name):
   args = dict(num_envs=16, batch_size=8, num_minibatches=2, num_timesteps=1000, progress=False)
   args.update(kwargs)
   with pytest.raises(ValueError, match=rf"^{name}:"):
     train.train("train.experiments.pusher:PusherEnv", **args)
+
+
+def test_eval_task_kwargs_evaluate_in_another_setting(smoke, tmp_path):
+  """``eval_task_kwargs``: every periodic evaluation runs the task built with them (here a goal tolerance
+  so wide that every episode succeeds at once), training is unchanged, config.json records them."""
+  out = str(tmp_path / "run")
+  res = train.train("train.experiments.pusher:PusherEnv", seeds=SEEDS, eval_task_kwargs={"tol": 10.0},
+                    num_timesteps=2 * ITER, eval_every=ITER, out_dir=out, **TINY)
+  assert [r["eval/completion"] for r in res.history] == [1.0] * 4
+  assert min(r["eval/completion"] for r in smoke.history) < 1.0  # in the training setting it is not given
+  with open(os.path.join(out, "config.json")) as f:
+    meta = json.load(f)
+  assert meta["eval_task_kwargs"] == {"tol": 10.0} and meta["task_kwargs"] == {}
+
+
+def test_eval_task_kwargs_are_checked_before_compiling(env):
+  """Another observation size, or a task given as an env instance, is refused naming eval_task_kwargs."""
+  args = dict(num_envs=16, batch_size=8, num_minibatches=2, num_timesteps=1000, progress=False)
+  with pytest.raises(ValueError, match=r"^eval_task_kwargs: .*observation shape"):
+    train.train("place_plate", task_kwargs={"obs_mode": "paper"}, eval_task_kwargs={"obs_mode": "full"}, **args)
+  with pytest.raises(ValueError, match=r"^eval_task_kwargs: only used with a task name"):
+    train.train(env, eval_task_kwargs={"tol": 1.0}, **args)
 
 
 def test_unknown_task():
@@ -297,6 +321,18 @@ def test_cli_errors_and_flags(capsys):
   assert args["seeds"] == (0, 1, 2) and args["preset"] == "paper"
   assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000,
                     "anneal_entropy": True}
+
+
+def test_cli_eval_task_arg_is_checked_before_compiling(capsys, tmp_path):
+  """``--eval-task-arg``: a malformed item or a keyword the task refuses stops the run (exit 2) naming it."""
+  from train import cli
+  out = str(tmp_path / "run")
+  pusher = ["--task", "train.experiments.pusher:PusherEnv", "--out", out, "--no-progress"]
+  assert cli.main(pusher + ["--eval-task-arg", "tol"]) == 2
+  assert "--eval-task-arg: expected KEY=JSON" in capsys.readouterr().err
+  assert cli.main(pusher + ["--eval-task-arg", "no_such_keyword=1"]) == 2
+  assert "eval_task_kwargs:" in capsys.readouterr().err
+  assert not os.path.exists(os.path.join(out, "checkpoint.npz"))
 
 
 def test_train_evaluate_is_the_module():

@@ -154,6 +154,9 @@ def build_parser() -> Parser:
   p.add_argument("--task", required=True, help="registered task name, or package.module:EnvClass")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="override passed to tasks.make (repeatable), e.g. --task-arg obs_mode=paper")
+  p.add_argument("--eval-task-arg", action="append", default=[], metavar="KEY=JSON",
+                 help="override of the evaluations' task over --task-arg (repeatable), e.g. after --task-arg "
+                      "start=route: --eval-task-arg start=in_front (default: evaluate in the training setting)")
   p.add_argument("--robot", default=None, help="robot of a registered --task, e.g. gripper (default: the task's, panda)")
   p.add_argument("--out", dest="out_dir", default=None,
                  help="run directory (config, metrics, checkpoint, curves) (default: runs/train-<task>-<time>/, a new folder)")
@@ -267,6 +270,12 @@ def main(argv=None) -> int:
         raise ValueError(f"--robot: {robot!r} disagrees with --task-arg robot={task_kwargs['robot']!r}")
       task_kwargs["robot"] = robot
     args["task_kwargs"] = task_kwargs or None
+    eval_items = args.pop("eval_task_arg")
+    try:
+      eval_extra = tasks.parse_task_args(eval_items)
+    except ValueError as e:
+      raise ValueError(str(e).replace("--task-arg", "--eval-task-arg")) from None
+    args["eval_task_kwargs"] = {**task_kwargs, **eval_extra} if eval_extra else None
     if args["init_from"] is not None and not os.path.exists(args["init_from"]):
       raise ValueError(f"--init-from: no checkpoint at {args['init_from']}")
     if args["init_seed"] is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 from typing import Optional
 
+import jax
 import numpy as np
 from brax.envs.base import Env, Wrapper
 
@@ -65,6 +66,24 @@ def resolve_task(task, task_kwargs: Optional[dict] = None) -> tuple[Env, str]:
       raise ValueError(f"task: {name} neither tracks damage nor is wrapped in DamageWrapper")
     env = DamageWrapper(env, weight=0.0)
   return env, name
+
+
+def eval_env_of(task, env, eval_task_kwargs: dict):
+  """The env of ``task`` built with ``eval_task_kwargs``, checked against the training ``env`` (same
+  observation and action sizes) before anything compiles; ValueError naming ``eval_task_kwargs``."""
+  if not isinstance(task, str):
+    raise ValueError("eval_task_kwargs: only used with a task name")
+  if not isinstance(eval_task_kwargs, dict):
+    raise ValueError(f"eval_task_kwargs: a dict of task keyword arguments, got {eval_task_kwargs!r}")
+  try:
+    eval_env, _ = resolve_task(task, eval_task_kwargs)
+  except (TypeError, ValueError) as e:
+    raise ValueError(f"eval_task_kwargs: {task} refuses {eval_task_kwargs}: {e}") from None
+  shapes = [(jax.eval_shape(e.reset, jax.random.PRNGKey(0)).obs.shape, e.action_size) for e in (env, eval_env)]
+  if shapes[0] != shapes[1]:
+    raise ValueError(f"eval_task_kwargs: the evaluation env's (observation shape, action size) {shapes[1]} "
+                     f"differ from the training env's {shapes[0]}")
+  return eval_env
 
 
 def task_episode_length(env, default: int = 200) -> int:

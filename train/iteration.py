@@ -357,14 +357,17 @@ class Trainer:
     return ts, metrics
 
   # -- evaluation (train.evaluate owns the rollout) --------------------------
-  def make_evaluator(self, devices=None) -> "E.Evaluator":
-    """The deterministic policy's Evaluator on ``base_env`` (episodes sharded over ``devices``, default all);
-    weights are passed as data per call."""
+  def make_evaluator(self, devices=None, env: Optional[Env] = None) -> "E.Evaluator":
+    """The deterministic policy's Evaluator on ``env`` (default ``base_env``; another env of the same
+    observation and action sizes, e.g. the task with its evaluation start) with episodes sharded over
+    ``devices`` (default all); weights are passed as data per call."""
     apply = N.policy_apply(self.make_policy, deterministic=True)
-    return E.Evaluator(self.base_env, E.parametrized_policy(apply, None), self.cfg.episode_length, devices)
+    return E.Evaluator(self.base_env if env is None else env, E.parametrized_policy(apply, None),
+                       self.cfg.episode_length, devices)
 
   def evaluate(self, evaluator: "E.Evaluator", inference_params, key, num_episodes: int) -> dict:
     """``num_episodes`` deterministic episodes of one seed's policy → train.evaluate's flat summary."""
     keys = np.asarray(jax.random.split(key, num_episodes))
     per_ep = evaluator.run(keys, 1.0, params=inference_params)
-    return E.scalar_metrics(E.metrics(per_ep, self.base_env.entity_names, self.safe_threshold))
+    env = evaluator.env
+    return E.scalar_metrics(E.metrics(per_ep, env.entity_names, safe_threshold_of(env)))

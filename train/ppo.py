@@ -43,7 +43,7 @@ from train import memory as MEM
 from train import distributed
 from train import mesh as M
 from train.config import RESUMABLE_CHANGES, PPOConfig
-from train.envs import recorded_task_kwargs, resolve_task, safe_threshold_of, task_episode_length  # noqa: F401
+from train.envs import eval_env_of, recorded_task_kwargs, resolve_task, safe_threshold_of, task_episode_length  # noqa: F401
 from train.iteration import Trainer, TrainState, annealed_entropy, scheduled_weight, shape_reward  # noqa: F401
 from train.multipliers import lagrange_update  # noqa: F401
 from train.policy import load_policy  # noqa: F401
@@ -220,7 +220,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
           episode_length: Optional[int] = None, out_dir: Optional[str] = None, resume: bool = False,
           progress: bool = True, time_limit: Optional[float] = None, task_kwargs: Optional[dict] = None,
           profile: bool = False, plot: bool = True, init_from: Optional[str] = None,
-          init_seed: Optional[int] = None, devices=None,
+          init_seed: Optional[int] = None, devices=None, eval_task_kwargs: Optional[dict] = None,
           **config) -> TrainResult:
   """Train PPO / PPO-Lagrangian / PID-Lagrangian on ``task`` for one or several seeds in one program.
 
@@ -241,6 +241,9 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       whose actor and observation normaliser start every seed (one seed broadcast, or one per seed);
       ``init_seed`` picks one seed of a multi-seed checkpoint to start every seed;
       the critic starts fresh — ``critic_warmup_iterations`` holds the actor while it learns.
+    eval_task_kwargs: the task's keyword arguments for the periodic evaluations (default: ``task_kwargs``),
+      e.g. the evaluation's start where training draws from a wider one (tasks/shelve_item.py
+      ``start="route"``); same task, same observation and action sizes. Recorded in config.json.
     devices: "all", a count, or a device list (train.distributed.select_devices); None: the first device.
       Seeds and each seed's env batch are laid across them (train.mesh); evaluation shards its episodes over them.
       With several processes (train.distributed.initialize first) every process calls train() alike and
@@ -264,6 +267,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   if resume and out_dir is None:
     raise ValueError("resume: needs out_dir (where the checkpoint is)")
   env, task_name = resolve_task(task, task_kwargs)
+  eval_env = None if eval_task_kwargs is None else eval_env_of(task, env, eval_task_kwargs)
   if episode_length is None:
     cfg = dataclasses.replace(cfg, episode_length=task_episode_length(env))
   devs = distributed.select_devices(devices)
@@ -286,6 +290,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       os.makedirs(out_dir, exist_ok=True)
       writes = out_dir
   meta = {"task": task_name, "task_kwargs": recorded_task_kwargs(task, env, task_kwargs), "preset": preset,
+          **({} if eval_env is None else
+             {"eval_task_kwargs": recorded_task_kwargs(task, eval_env, eval_task_kwargs)}),
           "config": cfg.to_json(),
           "obs_size": trainer.obs_size, "action_size": trainer.action_size, "steps_per_iteration": spi,
           "init_from": None if init_file is None else os.path.abspath(init_file), "init_seed": init_seed,
@@ -322,7 +328,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
 
   # Donating the state lets XLA update the env batches in place (GPU memory).
   iteration_fn = M.per_seed(trainer.train_iteration, mesh, specs, (specs, M.P(M.SEEDS)), donate=True)
-  evaluator = trainer.make_evaluator(devs)
+  evaluator = trainer.make_evaluator(devs, eval_env)
 
   def evaluate_all(ts, iteration):
     """Per-seed deterministic evaluation: seed s uses keys from PRNGKey(s + 1), folded with the iteration."""
