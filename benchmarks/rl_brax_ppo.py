@@ -138,14 +138,15 @@ def network_factory(init_log_std: tuple[float, float] | None):
 
 
 def export_policy(path: str, params, env, task: str, settings: dict, weight: float, seed: int, cfg: dict,
-                  env_steps: int, init: tuple[str, int] | None = None) -> None:
+                  env_steps: int, init: tuple[str, int] | None = None, eval_settings: dict | None = None) -> None:
   """Write brax's final policy ``params`` ((normaliser, policy weights[, value weights])) as a policy-only
   checkpoint of our format at ``path``: what ``train.load_policy``, ``--init-from`` of our trainer and of this
   script, and every ``checkpoint:PATH`` policy spec (eval, sweep, policy_recheck.py) read.
 
   The recipe's networks are our playground preset's (same MLPs, activation, normaliser: :func:`check_init`
   holds the reverse direction to that), so its config records the preset with this run's sizes and seed;
-  ``meta["trainer"]`` says brax trained it. The value function is not kept (nothing reads it).
+  ``meta["trainer"]`` says brax trained it. The value function is not kept (nothing reads it). ``eval_settings``:
+  the task keywords the run was evaluated with, recorded as ``eval_task_kwargs`` (what eval and the re-scorers run).
   """
   obs_size = int(jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape[-1])
   ours = PPOConfig.preset(
@@ -160,7 +161,8 @@ def export_policy(path: str, params, env, task: str, settings: dict, weight: flo
           "obs_size": obs_size, "action_size": int(env.action_size), "env_steps": int(env_steps),
           "trainer": "brax.training.agents.ppo.train, the recipe of benchmarks/rl_brax_ppo.py",
           "init_from": None if init is None else os.path.basename(init[0]),
-          "init_seed": None if init is None else init[1]}
+          "init_seed": None if init is None else init[1],
+          **({} if eval_settings is None else {"eval_task_kwargs": eval_settings})}
   one_seed = jax.tree.map(lambda x: np.asarray(x)[None], (params[0], params[1]))  # the seed axis of our files
   os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
   ckpt.save(path, (), one_seed, meta)
@@ -173,7 +175,7 @@ def policy_path(stem: str, weight: float, seed: int) -> str:
 
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
               settings: dict | None = None, actions=("mode",), init: tuple[str, int] | None = None,
-              export: str | None = None, curve_episodes: int = 0) -> dict:
+              export: str | None = None, curve_episodes: int = 0, eval_settings: dict | None = None) -> dict:
   """One brax PPO run, then the 1024-episode evaluation of its final policy; a result row.
 
   ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
@@ -182,11 +184,14 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   ``init``: (checkpoint file, seed): brax starts from that actor and observation normaliser of our trainer
   (the same brax networks, :func:`check_init`), with its own fresh value function (``restore_value_fn=False``).
   ``export``: also write the final policy there (:func:`export_policy`), before it is scored.
+  ``eval_settings``: task keywords of every evaluation (brax's own, the scored curve, the final), e.g. the
+  evaluation's start where training draws from a wider one; default ``settings``.
   ``curve_episodes``: > 0: score the policy of each of brax's evaluations on that many episodes by the first
   action (``scored_curve``, ``time_to_80_safe_s``); their seconds are kept off the run's clock.
   """
   settings = dict(RL_SETTINGS.get(task, {}) if settings is None else settings)
   env = tasks.make(task, damage_weight=weight, **settings)
+  eval_env = env if eval_settings is None else tasks.make(task, damage_weight=weight, **eval_settings)
   episode_length = env.unwrapped.episode_length
   curve, last, scored = [], {}, []
   scoring = {"seconds": 0.0, "evaluator": None}  # per-evaluation scoring: off the run's clock
@@ -208,9 +213,9 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
       t0, at = time.time(), round(clock(), 1)
       if scoring["evaluator"] is None:  # one compile; each evaluation's weights are data
         scoring["evaluator"] = make_evaluator(
-            env, parametrized_policy(policy_apply(make_policy, action=actions[0]), None), episode_length)
+            eval_env, parametrized_policy(policy_apply(make_policy, action=actions[0]), None), episode_length)
       m = eval_metrics(scoring["evaluator"].run(episode_keys(CURVE_SEED, curve_episodes), 1.0, params=params),
-                       env.entity_names)
+                       eval_env.entity_names)
       scored.append({"env_steps": int(step), "wall_s": at, "completion": m["completion"],
                      "safe_completion": m["safe_completion"], "episode_cost": m["cost_mean"]})
       scoring["seconds"] += time.time() - t0
@@ -232,23 +237,24 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         normalize_observations=cfg["normalize_observations"], reward_scaling=cfg["reward_scaling"],
         network_factory=network_factory(cfg.get("init_log_std")),
         num_evals=cfg["num_evals"], num_eval_envs=cfg["num_eval_envs"], seed=seed,
-        progress_fn=progress, policy_params_fn=keep_params, **restore)
+        progress_fn=progress, policy_params_fn=keep_params, eval_env=eval_env, **restore)
   except _Budget:
     stopped_early = True
   train_s = clock()
 
   make_policy = last["make_policy"]
   if export is not None:
-    export_policy(export, last["params"], env, task, settings, weight, seed, cfg, last["step"], init)
+    export_policy(export, last["params"], env, task, settings, weight, seed, cfg, last["step"], init, eval_settings)
   t0 = time.time()
   by_action = {}
   for action in actions:
-    res = evaluate(env, parametrized_policy(policy_apply(make_policy, action=action), last["params"]),
+    res = evaluate(eval_env, parametrized_policy(policy_apply(make_policy, action=action), last["params"]),
                    episodes=cfg["eval_episodes"], seed=EVAL_SEED)
     by_action[action] = res["metrics"]
   m = by_action[actions[0]]
   return {
       "task": task, "task_settings": settings, "damage_weight": weight, "seed": seed,
+      **({} if eval_settings is None else {"eval_task_settings": eval_settings}),
       "reward": "task reward only" if weight == 0 else f"task + damage penalty, w = {weight:g}",
       "completion": m["completion"], "safe_completion": m["safe_completion"], "avg_env_health": m["avg_health"],
       "episode_cost": m["cost_mean"], "task_return": m.get("task_return"), "eval_episodes": m["episodes"],
@@ -295,10 +301,12 @@ def _settings_label(row: dict, doc: dict) -> str:
   """The row's task settings where they differ from the file's (the task's RL setting)."""
   s = row.get("task_settings", doc["task_settings"])
   base = _robot_named(doc["task_settings"]) or {}
+  ev = row.get("eval_task_settings")
+  evaluated = "" if not ev else ", evaluated with " + ", ".join(f"{k}={v}" for k, v in ev.items() if s.get(k) != v)
   if _robot_named(s) == base:
-    return ""
+    return evaluated
   # the robot only where it is not the file's
-  return ", task " + ", ".join(f"{k}={v}" for k, v in s.items() if k != "robot" or v != base.get("robot"))
+  return ", task " + ", ".join(f"{k}={v}" for k, v in s.items() if k != "robot" or v != base.get("robot")) + evaluated
 
 
 def _action_label(row: dict) -> str:
@@ -321,7 +329,7 @@ def _key(row: dict):
   training on a GPU is not bitwise reproducible, so both are evidence); the same run merged twice is one row."""
   return (row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True),
           json.dumps(_robot_named(row.get("task_settings")), sort_keys=True),
-          row.get("init_from"), row.get("init_seed"), row.get("date"))
+          json.dumps(row.get("eval_task_settings"), sort_keys=True), row.get("init_from"), row.get("init_seed"), row.get("date"))
 
 
 def _t80_label(row: dict) -> str:
@@ -423,6 +431,9 @@ def parse_args(argv=None):
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="task keyword arguments over its RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; rows record them")
+  p.add_argument("--eval-task-settings", default=None, metavar="JSON",
+                 help="task keywords changed for every evaluation over the training ones, e.g. "
+                      "'{\"start\": \"in_front\"}' after --task-settings '{\"start\": \"route\"}'; rows record them")
   p.add_argument("--out-dir", default=RESULTS)
   p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
   p.add_argument("--export-policy", action="store_true",
@@ -481,7 +492,29 @@ def parse_args(argv=None):
   a.settings = tasks.rl_settings(a.task, a.task_settings)
   if "damage_weight" in a.settings:
     raise ValueError("task_settings: damage_weight is set by --damage-weights, not here")
+  a.eval_settings = None
+  if a.eval_task_settings is not None:
+    a.eval_settings = eval_settings_of(a.task, a.settings, a.eval_task_settings)
   return a
+
+
+def eval_settings_of(task: str, settings: dict, eval_json: str) -> dict:
+  """``settings`` with the task keywords of the JSON object ``eval_json`` over them, checked by tasks.make
+  before anything compiles; ValueError naming ``eval_task_settings``."""
+  try:
+    extra = json.loads(eval_json)
+  except json.JSONDecodeError as e:
+    raise ValueError(f"eval_task_settings: not JSON ({e}), got {eval_json!r}") from None
+  if not isinstance(extra, dict) or not extra:
+    raise ValueError(f"eval_task_settings: a non-empty JSON object of task keyword arguments, got {eval_json!r}")
+  if "damage_weight" in extra:
+    raise ValueError("eval_task_settings: damage_weight is set by --damage-weights, not here")
+  out = {**settings, **extra}
+  try:
+    tasks.make(task, **out)
+  except (TypeError, ValueError) as e:
+    raise ValueError(f"eval_task_settings: {task} refuses {out}: {e}") from None
+  return out
 
 
 def _load_results(path: str) -> dict:
@@ -551,7 +584,8 @@ def main(argv=None) -> int:
     for s in a.seed_list:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
       row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init,
-                      export=policy_path(stem, w, s) if a.export_policy else None, curve_episodes=a.curve_episodes)
+                      export=policy_path(stem, w, s) if a.export_policy else None, curve_episodes=a.curve_episodes,
+                      eval_settings=a.eval_settings)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"], **({"card_shared_by": a.shared_card} if a.shared_card > 1 else {}))
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "

@@ -171,6 +171,10 @@ def parse(argv):
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="registered tasks: task keyword arguments over its RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; rows record them")
+  p.add_argument("--eval-task-settings", default=None, metavar="JSON",
+                 help="task keywords changed for every evaluation (periodic and final) over the training ones, "
+                      "e.g. '{\"start\": \"in_front\"}' after --task-settings '{\"start\": \"route\"}' "
+                      "(default: evaluate in the training setting)")
   p.add_argument("--methods", default="task_only,penalty,lagrangian,pid", help=f"comma-separated of {','.join(METHODS)}")
   p.add_argument("--seeds", type=_ints, default=(0, 1, 2, 3, 4))
   p.add_argument("--preset", default="playground", help="preset of the non-paper methods (train/config.py)")
@@ -312,6 +316,11 @@ def parse(argv):
       p.error(f"--task-settings: {e}")
     if any(k in json.loads(args.task_settings) for k in ("damage_weight", "obs_mode")):
       p.error("--task-settings: damage_weight comes from the methods and obs_mode from --obs-mode")
+  if args.eval_task_settings is not None:
+    try:
+      args.eval_overrides = eval_overrides(args.task, args.task_settings, args.eval_task_settings)
+    except ValueError as e:
+      p.error(f"--eval-task-settings: {e}")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
   for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps)):
@@ -408,6 +417,30 @@ def with_headline(row: dict, action: str, source: str) -> dict:
               eval_actions=[action] + [a for a in _actions(row) if a != action])
 
 
+def eval_overrides(task: str, task_settings: str | None, eval_settings: str) -> dict:
+  """The JSON object ``eval_settings`` of task keywords, checked over ``task``'s training settings (its RL
+  setting with ``task_settings``): ValueError on bad JSON, a non-object, damage_weight / obs_mode (they come
+  from the methods and --obs-mode) or keywords the task refuses. Before anything compiles."""
+  import tasks
+
+  if ":" in task:
+    raise ValueError("only for registered tasks, not package.module:EnvClass")
+  try:
+    extra = json.loads(eval_settings)
+  except json.JSONDecodeError as e:
+    raise ValueError(f"not JSON ({e}), got {eval_settings!r}") from None
+  if not isinstance(extra, dict) or not extra:
+    raise ValueError(f"a non-empty JSON object of task keyword arguments, got {eval_settings!r}")
+  if any(k in extra for k in ("damage_weight", "obs_mode")):
+    raise ValueError("damage_weight comes from the methods and obs_mode from --obs-mode")
+  settings = {**tasks.rl_settings(task, task_settings), **extra}
+  try:
+    tasks.make(task, **settings)
+  except (TypeError, ValueError) as e:
+    raise ValueError(f"{task} refuses {settings}: {e}") from None
+  return extra
+
+
 def run_method(name: str, args, command: str, work: str) -> dict:
   import tasks
   import train
@@ -424,6 +457,9 @@ def run_method(name: str, args, command: str, work: str) -> dict:
     if args.obs_mode:
       task_kwargs["obs_mode"] = args.obs_mode
     task_kwargs = task_kwargs or None
+  eval_kwargs = None  # None: evaluate in the training setting
+  if getattr(args, "eval_overrides", None):
+    eval_kwargs = {**(task_kwargs or {}), **args.eval_overrides}
   run_dir = os.path.join(work, name)
   print(f"== {name}: {spec['label']}, seeds {list(args.seeds)}, {args.budget_seconds:.0f} s", flush=True)
   steps = min(args.timesteps, args.paper_timesteps) if spec["preset"] == "paper" else args.timesteps
@@ -434,12 +470,13 @@ def run_method(name: str, args, command: str, work: str) -> dict:
       calls = json.load(f)
   res = train.train(args.task, task_kwargs=task_kwargs, seeds=args.seeds, num_timesteps=int(steps),
                     eval_every=int(args.eval_every), num_eval_envs=args.eval_envs, checkpoint_every=0,
-                    out_dir=run_dir, time_limit=args.budget_seconds, progress=True, resume=args.resume, **kw)
+                    out_dir=run_dir, time_limit=args.budget_seconds, progress=True, resume=args.resume,
+                    eval_task_kwargs=eval_kwargs, **kw)
   calls.append({"command": command, "date": time.strftime("%Y-%m-%d %H:%M"), "device": device_info()[1],
                 "iterations_at_end": res.iterations, "env_steps_per_seed_at_end": res.env_steps,
                 "wall_time_s": round(res.wall_time, 1)})
   io.write_json(calls_path, calls, indent=1)
-  env, _ = train.resolve_task(args.task, task_kwargs)
+  env, _ = train.resolve_task(args.task, task_kwargs if eval_kwargs is None else eval_kwargs)
   t0 = time.perf_counter()
   finals = {}  # action -> per-seed metrics, in args.seeds order
   for action in args.eval_actions:
@@ -464,6 +501,7 @@ def run_method(name: str, args, command: str, work: str) -> dict:
       "label": spec["label"], "method": name, "command": command, "calls": calls,
       "eval_actions": list(args.eval_actions),
       "train_kwargs": kw, "task_kwargs": task_kwargs,
+      **({} if eval_kwargs is None else {"eval_task_kwargs": eval_kwargs}),
       "config": res.config.to_json(), "seeds": list(args.seeds), "per_seed": per_seed, "summary": summary,
       "env_steps_per_seed": res.env_steps, "wall_time_s": res.wall_time, "train_time_s": res.train_time,
       "throughput_all_seeds": res.throughput if math.isfinite(res.throughput) else None,  # None: 1 iteration, none timed
@@ -531,10 +569,14 @@ def write_results(base: str, payload: dict) -> None:
            "(min) over seeds, in % for rates. Safe completion = completed and every tracked entity's final "
            "health > 95. Time to 80 %: first periodic evaluation with ≥ 80 % safe and ≥ 80 % completion, "
            "s of training (compile incl.; summed over the calls of a resumed run); 'n/S' seeds got there. Seeds ≥ 80/90: seeds whose "
-           "final policy has ≥ 80 % safe completion and ≥ 90 % completion.", "",
-           "| method | seeds | completion % | safe completion % | seeds ≥ 80/90 | avg env health | episode cost "
-           "| time to 80 % safe (s) | env-steps/s (all seeds) | env-steps per seed |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "final policy has ≥ 80 % safe completion and ≥ 90 % completion.", ""]
+  for r in payload["rows"]:
+    if r.get("eval_task_kwargs"):  # trained in one setting, evaluated in another
+      lines += [f"{r['label']}: trained with task settings `{json.dumps(r['task_kwargs'], sort_keys=True)}`, "
+                f"evaluated (periodic and final) with `{json.dumps(r['eval_task_kwargs'], sort_keys=True)}`.", ""]
+  lines += ["| method | seeds | completion % | safe completion % | seeds ≥ 80/90 | avg env health | episode cost "
+            "| time to 80 % safe (s) | env-steps/s (all seeds) | env-steps per seed |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
   for r in payload["rows"]:
     r = dict(r, label=_labelled(r))
     s, t = r["summary"], r["summary"]["time_to_80_safe_s"]

@@ -115,11 +115,14 @@ def _settings(*parts) -> str:
 UNNAMED_ROBOT = "gripper"
 
 
-def _task_settings(kw: dict | None) -> str:
-  """Task keywords as ``k=v, …``; files written before the Panda became the default robot name none and
+def _task_settings(kw: dict | None, eval_kw: dict | None = None) -> str:
+  """Task keywords as ``k=v, …``, then those the evaluations changed (``eval_kw``: the run trained in one
+  setting and was scored in another); files written before the Panda became the default robot name none and
   ran the gripper (as checkpoints and eval results of that time load), so they group with runs naming it."""
   kw = {"robot": UNNAMED_ROBOT, **(kw or {})}
-  return ", ".join(f"{k}={v}" for k, v in sorted(kw.items()))
+  out = ", ".join(f"{k}={v}" for k, v in sorted(kw.items()))
+  changed = {k: v for k, v in (eval_kw or {}).items() if kw.get(k) != v}
+  return out + ("; evaluated with " + ", ".join(f"{k}={v}" for k, v in sorted(changed.items())) if changed else "")
 
 
 def _budget(row: dict) -> str:
@@ -143,7 +146,8 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
     s = _scores(r.get("by_action"), r, (r.get("eval_actions") or ["mode"])[0], action)
     runs.append(dict(trainer=BRAX, reward=_reward(r["damage_weight"]), seed=r["seed"], device=doc["device"],
                      settings=_settings(_std(r.get("recipe", {}).get("init_log_std")), _budget(r), actor,
-                                        _task_settings(r.get("task_settings", doc.get("task_settings")))),
+                                        _task_settings(r.get("task_settings", doc.get("task_settings")),
+                                                       r.get("eval_task_settings"))),
                      env_steps=r["env_steps"], scores=s, command=r["command"], source=source,
                      date=r.get("date"), t80=r.get("time_to_80_safe_s"),
                      # a run that shared its device with others has no comparable seconds
@@ -171,7 +175,7 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
       runs.append(dict(trainer=trainer, reward=_reward(kw.get("damage_weight", 0.0), r["method"], r["label"]),
                        seed=p["seed"], device=doc["device"].split(" (")[0],
                        settings=_settings(_std(kw.get("init_log_std")) if trainer != PAPER else "", schedule,
-                                          actor, _task_settings(r.get("task_kwargs"))),
+                                          actor, _task_settings(r.get("task_kwargs"), r.get("eval_task_kwargs"))),
                        env_steps=r["env_steps_per_seed"],
                        scores=_scores(p.get("final_eval_by_action"), p["final_eval"], head, action),
                        command=r["command"], source=source, date=r.get("date"),

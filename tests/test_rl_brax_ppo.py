@@ -1,6 +1,7 @@
 """benchmarks/rl_brax_ppo.py: the second trainer's settings are what it says (no training here)."""
 
 import os
+import types
 
 import jax
 import jax.numpy as jnp
@@ -57,6 +58,48 @@ def test_task_settings_go_over_the_rl_setting_and_keep_rows_of_other_settings_ap
   doc = {"task_settings": R.RL_SETTINGS["pick_egg"]}
   assert R._settings_label(row, doc) == ", task goal=carry, start=pregrasp"
   assert R._settings_label(dict(row, task_settings=doc["task_settings"]), doc) == ""
+
+
+@pytest.mark.parametrize("value", ['{"start": "teleport"}', "not json", "{}", '{"damage_weight": 1}', '["start"]'])
+def test_bad_eval_task_settings_are_refused_naming_them(value):
+  with pytest.raises(ValueError, match="eval_task_settings"):
+    R.parse_args(["--task", "shelve_item", '--task-settings={"start": "route"}', f"--eval-task-settings={value}"])
+
+
+def test_eval_task_settings_go_to_every_evaluation_and_label_the_row(monkeypatch):
+  """Brax's own evaluations and the final one run the task with --eval-task-settings over the training ones;
+  the row records them, its key and label tell it from a run evaluated in its training setting."""
+  a = R.parse_args(["--task", "shelve_item", '--task-settings={"start": "route"}',
+                    '--eval-task-settings={"start": "in_front"}'])
+  assert a.settings["start"] == "route" and a.eval_settings == dict(a.settings, start="in_front")
+  made, used = [], {}
+
+  def fake_make(task, **kw):
+    made.append(kw["start"])
+    return types.SimpleNamespace(start=kw["start"], unwrapped=types.SimpleNamespace(episode_length=8),
+                                 entity_names=("box",))
+
+  def fake_train(environment, eval_env, progress_fn, policy_params_fn, **kw):
+    used.update(train=environment.start, brax_eval=eval_env.start)
+    policy_params_fn(10, lambda *x, **k: None, "weights")
+
+  def fake_evaluate(env, policy, **kw):
+    used["final"] = env.start
+    return {"metrics": {"completion": 1.0, "safe_completion": 1.0, "avg_health": 100.0, "cost_mean": 0.0,
+                        "episodes": 8}}
+
+  monkeypatch.setattr(R.tasks, "make", fake_make)
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  monkeypatch.setattr(R, "evaluate", fake_evaluate)
+  monkeypatch.setattr(R, "parametrized_policy", lambda *x, **k: None)
+  row = R.train_one("shelve_item", 2.0, 0, dict(R.PLAYGROUND_PANDA_PICK_CUBE, eval_episodes=8), None, a.settings,
+                    eval_settings=a.eval_settings)
+  assert used == {"train": "route", "brax_eval": "in_front", "final": "in_front"}
+  assert row["eval_task_settings"]["start"] == "in_front"
+  plain = {k: v for k, v in row.items() if k != "eval_task_settings"}
+  assert R._key(row) != R._key(plain)
+  doc = {"task_settings": R.RL_SETTINGS["shelve_item"]}
+  assert R._settings_label(row, doc) == ", task start=route, evaluated with start=in_front"
 
 
 def test_reward_preference_takes_the_same_task_settings():

@@ -107,6 +107,40 @@ def test_task_settings_reach_the_task_keywords(monkeypatch):
   assert tasks.rl_settings(a.task, a.task_settings) == {"robot": "gripper", "goal": "carry", "start": "pregrasp"}
 
 
+@pytest.mark.parametrize("value", ['{"start": "teleport"}', "not json", "{}", '{"damage_weight": 1}',
+                                   '{"obs_mode": "full"}', '["start"]'])
+def test_bad_eval_task_settings_name_the_flag(value, capsys):
+  with pytest.raises(SystemExit):
+    rl_multiseed.parse(["--task", "shelve_item", "--task-settings", '{"start": "route"}', "--eval-task-settings", value])
+  assert "--eval-task-settings" in capsys.readouterr().err
+
+
+def test_eval_task_settings_reach_train_and_the_final_evaluation(monkeypatch, tmp_path):
+  """The evaluations' settings are the training ones with --eval-task-settings over them: train() gets them as
+  eval_task_kwargs, the final evaluation builds its env from them, and the row records both."""
+  import train
+  seen = {}
+
+  class Stop(Exception):
+    pass
+
+  def fake_train(task, task_kwargs=None, eval_task_kwargs=None, **kw):
+    seen.update(task_kwargs=task_kwargs, eval_task_kwargs=eval_task_kwargs)
+    raise Stop
+
+  monkeypatch.setattr(train, "train", fake_train)
+  a = rl_multiseed.parse(["--task", "shelve_item", "--task-settings", '{"start": "route"}',
+                          "--eval-task-settings", '{"start": "in_front"}', "--methods", "penalty"])
+  with pytest.raises(Stop):
+    rl_multiseed.run_method("penalty", a, "cmd", str(tmp_path))
+  assert seen == {"task_kwargs": {"robot": "gripper", "start": "route"},
+                  "eval_task_kwargs": {"robot": "gripper", "start": "in_front"}}
+  plain = rl_multiseed.parse(["--task", "shelve_item", "--methods", "penalty"])
+  with pytest.raises(Stop):
+    rl_multiseed.run_method("penalty", plain, "cmd", str(tmp_path / "plain"))
+  assert seen["eval_task_kwargs"] is None
+
+
 def test_task_settings_over_place_plates_rl_setting_keep_its_observation():
   a = rl_multiseed.parse(["--task", "place_plate", "--task-settings", '{"n_substeps": 5}'])
   import tasks
