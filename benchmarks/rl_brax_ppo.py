@@ -494,27 +494,10 @@ def parse_args(argv=None):
     raise ValueError("task_settings: damage_weight is set by --damage-weights, not here")
   a.eval_settings = None
   if a.eval_task_settings is not None:
-    a.eval_settings = eval_settings_of(a.task, a.settings, a.eval_task_settings)
+    a.eval_settings = tasks.settings_over(a.task, a.settings, a.eval_task_settings, "eval_task_settings")
+    if "damage_weight" in a.eval_settings:
+      raise ValueError("eval_task_settings: damage_weight is set by --damage-weights, not here")
   return a
-
-
-def eval_settings_of(task: str, settings: dict, eval_json: str) -> dict:
-  """``settings`` with the task keywords of the JSON object ``eval_json`` over them, checked by tasks.make
-  before anything compiles; ValueError naming ``eval_task_settings``."""
-  try:
-    extra = json.loads(eval_json)
-  except json.JSONDecodeError as e:
-    raise ValueError(f"eval_task_settings: not JSON ({e}), got {eval_json!r}") from None
-  if not isinstance(extra, dict) or not extra:
-    raise ValueError(f"eval_task_settings: a non-empty JSON object of task keyword arguments, got {eval_json!r}")
-  if "damage_weight" in extra:
-    raise ValueError("eval_task_settings: damage_weight is set by --damage-weights, not here")
-  out = {**settings, **extra}
-  try:
-    tasks.make(task, **out)
-  except (TypeError, ValueError) as e:
-    raise ValueError(f"eval_task_settings: {task} refuses {out}: {e}") from None
-  return out
 
 
 def _load_results(path: str) -> dict:

@@ -418,27 +418,19 @@ def with_headline(row: dict, action: str, source: str) -> dict:
 
 
 def eval_overrides(task: str, task_settings: str | None, eval_settings: str) -> dict:
-  """The JSON object ``eval_settings`` of task keywords, checked over ``task``'s training settings (its RL
-  setting with ``task_settings``): ValueError on bad JSON, a non-object, damage_weight / obs_mode (they come
-  from the methods and --obs-mode) or keywords the task refuses. Before anything compiles."""
+  """The task keywords of the JSON object ``eval_settings`` (checked over ``task``'s training settings, its RL
+  setting with ``task_settings``, by tasks.settings_over); damage_weight and obs_mode are refused (they come
+  from the methods and --obs-mode). ValueError; before anything compiles."""
   import tasks
 
   if ":" in task:
     raise ValueError("only for registered tasks, not package.module:EnvClass")
-  try:
-    extra = json.loads(eval_settings)
-  except json.JSONDecodeError as e:
-    raise ValueError(f"not JSON ({e}), got {eval_settings!r}") from None
-  if not isinstance(extra, dict) or not extra:
-    raise ValueError(f"a non-empty JSON object of task keyword arguments, got {eval_settings!r}")
+  train = tasks.rl_settings(task, task_settings)
+  merged = tasks.settings_over(task, train, eval_settings, "eval_task_settings")
+  extra = json.loads(eval_settings)
   if any(k in extra for k in ("damage_weight", "obs_mode")):
     raise ValueError("damage_weight comes from the methods and obs_mode from --obs-mode")
-  settings = {**tasks.rl_settings(task, task_settings), **extra}
-  try:
-    tasks.make(task, **settings)
-  except (TypeError, ValueError) as e:
-    raise ValueError(f"{task} refuses {settings}: {e}") from None
-  return extra
+  return {k: v for k, v in merged.items() if k in extra}
 
 
 def run_method(name: str, args, command: str, work: str) -> dict:

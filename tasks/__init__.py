@@ -116,20 +116,27 @@ def rl_settings(name: str, overrides_json: str | None = None) -> dict:
   before anything compiles: bad JSON, a non-object, an unknown override or a refused value raise
   ``ValueError`` naming ``task_settings``.
   """
-  settings = dict(RL_SETTINGS.get(name, {}))
+  return settings_over(name, RL_SETTINGS.get(name, {}), overrides_json)
+
+
+def settings_over(name: str, base: dict, overrides_json: str | None, field: str = "task_settings") -> dict:
+  """``base`` (task keywords of ``name``) with those of the JSON object ``overrides_json`` over them, checked
+  by :func:`make` before anything compiles; ``ValueError`` naming ``field`` (e.g. ``eval_task_settings``:
+  the evaluations' setting over the training one)."""
+  settings = dict(base)
   if overrides_json is None:
     return settings
   try:
     extra = json.loads(overrides_json)
   except json.JSONDecodeError as e:
-    raise ValueError(f"task_settings: not JSON ({e}), got {overrides_json!r}") from None
+    raise ValueError(f"{field}: not JSON ({e}), got {overrides_json!r}") from None
   if not isinstance(extra, dict):
-    raise ValueError(f"task_settings: a JSON object of task keyword arguments, got {overrides_json!r}")
+    raise ValueError(f"{field}: a JSON object of task keyword arguments, got {overrides_json!r}")
   settings.update(extra)
   try:
     make(name, **settings)
   except (TypeError, ValueError) as e:
-    raise ValueError(f"task_settings: {name} refuses {settings}: {e}") from None
+    raise ValueError(f"{field}: {name} refuses {settings}: {e}") from None
   return settings
 
 
