@@ -45,10 +45,18 @@ and the fixed w of the row (brax has no critic warm-up or w ramp), e.g. the crus
         --init-from benchmarks/results/rl_pick_egg_nvidia_h200_held_std0_task_only_s345_rerun_task_only_policy.npz \
         --init-seed 4 --eval-actions mode,sample --out-dir $OUT
 
-``--export-policy`` keeps each run's final weights (brax's normaliser and policy, ≈ 0.05 MB) beside the
-results as a policy file of our format, so they can come back from a device call and be scored again
-elsewhere (``benchmarks/policy_recheck.py --policies checkpoint:STEM_w2_s0_policy.npz``) or continued by
-either trainer (``--init-from``).
+``--export-policy`` keeps each run's final weights (brax's normaliser and policy, ≈ 0.05 MB, and its value
+function) beside the results as a policy file of our format, so they can come back from a device call and be
+scored again elsewhere (``benchmarks/policy_recheck.py --policies checkpoint:STEM_w2_s0_policy.npz``), start
+either trainer (``--init-from``), or go on in a later call (``--continue-from``: a run longer than one call;
+brax restores weights only, so its optimizer state and environments start afresh, and the row says so)::
+
+    python benchmarks/rl_brax_ppo.py --task shelve_item --task-settings '{"start":"route"}' \
+        --eval-task-settings '{"start":"in_front"}' --damage-weights 2 --seeds 0 --num-timesteps 30000000 \
+        --num-evals 11 --budget-seconds 400 --init-log-std=-0.5,-1.5 --eval-actions mode,sample \
+        --export-policy --out $OUT/rl_brax_shelve_item_route_a       # call 1
+    python benchmarks/rl_brax_ppo.py … --continue-from rl_brax_shelve_item_route_a_w2_s0_policy.npz \
+        --export-policy --out $OUT/rl_brax_shelve_item_route_b       # call 2, the first call's file carried
 
 CPU plumbing check (learns nothing)::
 
@@ -138,14 +146,16 @@ def network_factory(init_log_std: tuple[float, float] | None):
 
 
 def export_policy(path: str, params, env, task: str, settings: dict, weight: float, seed: int, cfg: dict,
-                  env_steps: int, init: tuple[str, int] | None = None, eval_settings: dict | None = None) -> None:
+                  env_steps: int, init: tuple[str, int] | None = None, eval_settings: dict | None = None,
+                  train_wall_s: float | None = None, continued_from: str | None = None) -> None:
   """Write brax's final policy ``params`` ((normaliser, policy weights[, value weights])) as a policy-only
   checkpoint of our format at ``path``: what ``train.load_policy``, ``--init-from`` of our trainer and of this
   script, and every ``checkpoint:PATH`` policy spec (eval, sweep, policy_recheck.py) read.
 
   The recipe's networks are our playground preset's (same MLPs, activation, normaliser: :func:`check_init`
   holds the reverse direction to that), so its config records the preset with this run's sizes and seed;
-  ``meta["trainer"]`` says brax trained it. The value function is not kept (nothing reads it). ``eval_settings``:
+  ``meta["trainer"]`` says brax trained it. Brax's value function (``params[2]``, where given) is kept in the
+  file's state slot (``meta["value_state"]``), so ``--continue-from`` can go on with the whole run. ``eval_settings``:
   the task keywords the run was evaluated with, recorded as ``eval_task_kwargs`` (what eval and the re-scorers run).
   """
   obs_size = int(jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape[-1])
@@ -162,10 +172,15 @@ def export_policy(path: str, params, env, task: str, settings: dict, weight: flo
           "trainer": "brax.training.agents.ppo.train, the recipe of benchmarks/rl_brax_ppo.py",
           "init_from": None if init is None else os.path.basename(init[0]),
           "init_seed": None if init is None else init[1],
-          **({} if eval_settings is None else {"eval_task_kwargs": eval_settings})}
-  one_seed = jax.tree.map(lambda x: np.asarray(x)[None], (params[0], params[1]))  # the seed axis of our files
+          **({} if eval_settings is None else {"eval_task_kwargs": eval_settings}),
+          **({} if train_wall_s is None else {"train_wall_s": round(float(train_wall_s), 1)}),
+          **({} if continued_from is None else {"continued_from": continued_from})}
+  seed_axis = lambda tree: jax.tree.map(lambda x: np.asarray(x)[None], tree)  # noqa: E731  (our files' seed axis)
+  one_seed = seed_axis((params[0], params[1]))
+  value = seed_axis(params[2]) if len(params) > 2 and params[2] is not None else ()
+  meta["value_state"] = value != ()
   os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-  ckpt.save(path, (), one_seed, meta)
+  ckpt.save(path, value, one_seed, meta)
 
 
 def policy_path(stem: str, weight: float, seed: int) -> str:
@@ -175,7 +190,8 @@ def policy_path(stem: str, weight: float, seed: int) -> str:
 
 def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | None,
               settings: dict | None = None, actions=("mode",), init: tuple[str, int] | None = None,
-              export: str | None = None, curve_episodes: int = 0, eval_settings: dict | None = None) -> dict:
+              export: str | None = None, curve_episodes: int = 0, eval_settings: dict | None = None,
+              cont: tuple[str, dict] | None = None) -> dict:
   """One brax PPO run, then the 1024-episode evaluation of its final policy; a result row.
 
   ``settings``: the task's keyword arguments (default: its RL setting, ``tasks.RL_SETTINGS``).
@@ -186,6 +202,9 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   ``export``: also write the final policy there (:func:`export_policy`), before it is scored.
   ``eval_settings``: task keywords of every evaluation (brax's own, the scored curve, the final), e.g. the
   evaluation's start where training draws from a wider one; default ``settings``.
+  ``cont``: (file, meta) of :func:`check_continue`: brax goes on from that run's normaliser, policy and value
+  function (its optimizer state and environments start afresh: brax's restore keeps only the weights); the
+  row's env steps, seconds and curves count on from that run's (``continued_from``), ``budget_s`` is this call's.
   ``curve_episodes``: > 0: score the policy of each of brax's evaluations on that many episodes by the first
   action (``scored_curve``, ``time_to_80_safe_s``); their seconds are kept off the run's clock.
   """
@@ -195,28 +214,29 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   episode_length = env.unwrapped.episode_length
   curve, last, scored = [], {}, []
   scoring = {"seconds": 0.0, "evaluator": None}  # per-evaluation scoring: off the run's clock
+  before_steps, before_s = (0, 0.0) if cont is None else (int(cont[1]["env_steps"]), float(cont[1]["train_wall_s"]))
   t_start = time.time()
 
   def clock():
     return time.time() - t_start - scoring["seconds"]
 
   def progress(step, metrics):
-    curve.append({"env_steps": int(step), "wall_s": round(clock(), 1),
+    curve.append({"env_steps": before_steps + int(step), "wall_s": round(before_s + clock(), 1),
                   "eval_episode_reward": float(metrics.get("eval/episode_reward", np.nan)),
                   "eval_success": float(metrics.get("eval/episode_success", np.nan))})
-    print(f"  w={weight:g} seed={seed}: {step} env-steps, {curve[-1]['wall_s']} s, "
+    print(f"  w={weight:g} seed={seed}: {curve[-1]['env_steps']} env-steps, {curve[-1]['wall_s']} s, "
           f"eval reward {curve[-1]['eval_episode_reward']:.2f}", flush=True)
 
   def keep_params(step, make_policy, params):
-    last.update(step=int(step), make_policy=make_policy, params=params)
+    last.update(step=before_steps + int(step), make_policy=make_policy, params=params)
     if curve_episodes:
-      t0, at = time.time(), round(clock(), 1)
+      t0, at = time.time(), round(before_s + clock(), 1)
       if scoring["evaluator"] is None:  # one compile; each evaluation's weights are data
         scoring["evaluator"] = make_evaluator(
             eval_env, parametrized_policy(policy_apply(make_policy, action=actions[0]), None), episode_length)
       m = eval_metrics(scoring["evaluator"].run(episode_keys(CURVE_SEED, curve_episodes), 1.0, params=params),
                        eval_env.entity_names)
-      scored.append({"env_steps": int(step), "wall_s": at, "completion": m["completion"],
+      scored.append({"env_steps": before_steps + int(step), "wall_s": at, "completion": m["completion"],
                      "safe_completion": m["safe_completion"], "episode_cost": m["cost_mean"]})
       scoring["seconds"] += time.time() - t0
     if budget_s is not None and step > 0 and clock() > budget_s:
@@ -226,6 +246,8 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   if init is not None:
     actor = load_policy(init[0], env, seed=init[1])  # (normaliser, policy params) of that seed
     restore = dict(restore_params=(actor.params[0], actor.params[1], None), restore_value_fn=False)
+  if cont is not None:
+    restore = dict(restore_params=continued_params(cont[0], env, cfg), restore_value_fn=True)
   stopped_early = False
   try:
     brax_ppo.train(
@@ -240,11 +262,12 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         progress_fn=progress, policy_params_fn=keep_params, eval_env=eval_env, **restore)
   except _Budget:
     stopped_early = True
-  train_s = clock()
+  train_s = before_s + clock()
 
   make_policy = last["make_policy"]
   if export is not None:
-    export_policy(export, last["params"], env, task, settings, weight, seed, cfg, last["step"], init, eval_settings)
+    export_policy(export, last["params"], env, task, settings, weight, seed, cfg, last["step"], init, eval_settings,
+                  train_s, None if cont is None else os.path.basename(cont[0]))
   t0 = time.time()
   by_action = {}
   for action in actions:
@@ -265,6 +288,8 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
                            "seconds": round(scoring["seconds"], 1)},
           "time_to_80_safe_s": time_to_safe(scored, keys=("safe_completion", "completion", "wall_s"))}),
       **({} if init is None else {"init_from": os.path.basename(init[0]), "init_seed": init[1]}),
+      **({} if cont is None else {"continued_from": {"file": os.path.basename(cont[0]), "env_steps": before_steps,
+                                                     "train_wall_s": before_s}}),
       **({} if export is None else {"policy_file": os.path.basename(export)}),
       "by_action": {a: {"completion": v["completion"], "safe_completion": v["safe_completion"],
                         "avg_env_health": v["avg_health"], "episode_cost": v["cost_mean"]}
@@ -273,6 +298,10 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
 
 
 def _std_label(row: dict) -> str:
+  c = row.get("continued_from")
+  if c:  # a run over several calls: what it continued, then the recipe's std
+    row = {k: v for k, v in row.items() if k != "continued_from"}
+    return _std_label(row) + f", continued from {c['file']} ({c['env_steps'] / 1e6:.1f} M)"
   if row.get("init_from"):
     return f", actor from {row['init_from']} seed {row['init_seed']}"
   std = row.get("recipe", {}).get("init_log_std")
@@ -295,6 +324,52 @@ def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
     seed = seeds[0]
   ckpt.check_seed(file, seeds, seed, "init_seed")
   return file, seed
+
+
+RECIPE_KEYS = ("num_envs", "batch_size", "num_minibatches", "num_updates_per_batch", "unroll_length", "learning_rate",
+               "entropy_cost", "discounting", "reward_scaling")
+
+
+def check_continue(path: str, task: str, settings: dict, eval_settings: dict | None, weights, seeds, cfg: dict,
+                   init) -> tuple[str, dict]:
+  """(file, meta) of ``--continue-from``: a policy this script exported (``--export-policy``) with its value
+  function, of the same task, settings, weight, seed and recipe as this call, else ValueError naming the flag."""
+  if init is not None:
+    raise ValueError("continue_from: give --continue-from or --init-from, not both")
+  if not os.path.isfile(path):
+    raise ValueError(f"continue_from: no file {path!r}")
+  try:
+    meta = ckpt.read_meta(path)
+  except Exception as e:  # not a checkpoint of ours
+    raise ValueError(f"continue_from: cannot read {path!r} ({e})") from None
+  if meta.get("kind") != "brax_ppo" or not meta.get("value_state"):
+    raise ValueError(f"continue_from: {path} is not a run this script exported with its value function")
+  ours = meta["config"]
+  for field, theirs, here in (("task", meta.get("task"), task), ("task settings", meta.get("task_kwargs"), settings),
+                              ("evaluation settings", meta.get("eval_task_kwargs"), eval_settings),
+                              ("damage weights", [ours["damage_weight"]], list(weights)),
+                              ("seeds", list(ours["seeds"]), list(seeds))):
+    if theirs != here:
+      raise ValueError(f"continue_from: {path} was trained with {field} {theirs!r}; this call has {here!r}")
+  for k in RECIPE_KEYS:
+    if ours.get(k) != cfg[k]:
+      raise ValueError(f"continue_from: {path} was trained with {k} = {ours.get(k)!r}; this call has {cfg[k]!r}")
+  std = None if ours.get("init_log_std") is None else list(ours["init_log_std"])
+  if std != (None if cfg.get("init_log_std") is None else list(cfg["init_log_std"])):
+    raise ValueError(f"continue_from: {path} was trained with init_log_std {std}; this call has {cfg.get('init_log_std')}")
+  if "train_wall_s" not in meta:
+    raise ValueError(f"continue_from: {path} records no training seconds (exported before --continue-from existed)")
+  return path, meta
+
+
+def continued_params(path: str, env, cfg: dict):
+  """(normaliser, policy, value) of the run exported at ``path``, for brax's ``restore_params``."""
+  actor = load_policy(path, env)
+  obs_size = int(jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape[-1])
+  nets = network_factory(cfg.get("init_log_std"))(obs_size, int(env.action_size))
+  template = jax.tree.map(lambda x: np.asarray(x)[None], nets.value_network.init(jax.random.PRNGKey(0)))
+  value = jax.tree.map(lambda x: np.asarray(x[0]), ckpt.restore(path, template, "state"))
+  return actor.params[0], actor.params[1], value
 
 
 def _settings_label(row: dict, doc: dict) -> str:
@@ -329,7 +404,8 @@ def _key(row: dict):
   training on a GPU is not bitwise reproducible, so both are evidence); the same run merged twice is one row."""
   return (row["damage_weight"], row["seed"], json.dumps(row.get("recipe", {}), sort_keys=True),
           json.dumps(_robot_named(row.get("task_settings")), sort_keys=True),
-          json.dumps(row.get("eval_task_settings"), sort_keys=True), row.get("init_from"), row.get("init_seed"), row.get("date"))
+          json.dumps(row.get("eval_task_settings"), sort_keys=True), row.get("init_from"), row.get("init_seed"),
+          json.dumps(row.get("continued_from"), sort_keys=True), row.get("date"))
 
 
 def _t80_label(row: dict) -> str:
@@ -428,6 +504,10 @@ def parse_args(argv=None):
                       "directory, checkpoint.npz or an rl_multiseed --export-policy file) with the recipe's "
                       "networks; brax's value function starts fresh")
   p.add_argument("--init-seed", type=int, default=None, help="with --init-from: which of its seeds")
+  p.add_argument("--continue-from", default=None, metavar="POLICY_FILE",
+                 help="go on with a run this script exported (--export-policy: its normaliser, policy and value "
+                      "function; brax's optimizer state starts afresh): same task, settings, weight, seed and "
+                      "recipe; the row counts env steps and seconds on from that run's")
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="task keyword arguments over its RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; rows record them")
@@ -550,6 +630,8 @@ def main(argv=None) -> int:
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
              eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}))
   stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
+  cont = None if a.continue_from is None else check_continue(
+      a.continue_from, a.task, a.settings, a.eval_settings, a.weights, a.seed_list, cfg, a.init)
   if a.export_policy:  # a policy file is a run's only copy of its weights: never replaced, refused before training
     there = [policy_path(stem, w, s) for w in a.weights for s in a.seed_list
              if os.path.exists(policy_path(stem, w, s))]
@@ -568,7 +650,7 @@ def main(argv=None) -> int:
       print(f"{a.task}: damage weight {w:g}, seed {s}", flush=True)
       row = train_one(a.task, w, s, cfg, a.budget_seconds, a.settings, a.actions, a.init,
                       export=policy_path(stem, w, s) if a.export_policy else None, curve_episodes=a.curve_episodes,
-                      eval_settings=a.eval_settings)
+                      eval_settings=a.eval_settings, cont=cont)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                  recipe=doc["recipe"], **({"card_shared_by": a.shared_card} if a.shared_card > 1 else {}))
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "

@@ -143,6 +143,8 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
   for r in doc["rows"]:
     init = r.get("init_from")
     actor = f"actor from {os.path.basename(init)} seed {r.get('init_seed')}" if init else ""
+    if r.get("continued_from"):  # one run over several calls (--continue-from): brax's optimizer restarted
+      actor = ", ".join(x for x in (actor, "continued over calls") if x)
     s = _scores(r.get("by_action"), r, (r.get("eval_actions") or ["mode"])[0], action)
     runs.append(dict(trainer=BRAX, reward=_reward(r["damage_weight"]), seed=r["seed"], device=doc["device"],
                      settings=_settings(_std(r.get("recipe", {}).get("init_log_std")), _budget(r), actor,

@@ -295,7 +295,7 @@ def test_export_policy_writes_brax_weights_that_every_reader_of_ours_takes(monke
   start either trainer (init_source, check_init) with its run's seed."""
   a = R.parse_args(["--task", "pick_egg", "--init-from", EGG, "--init-seed", "4", "--export-policy"])
   env = R.tasks.make("pick_egg", **a.settings)
-  brax_params = (*load_policy(EGG, env, seed=4).params, "value weights, not kept")
+  brax_params = (*load_policy(EGG, env, seed=4).params, None)  # no value function given: none kept
   _brax_final(monkeypatch, brax_params)
   path = str(tmp_path / "sub" / R.os.path.basename(R.policy_path("stem", 2.0, 7)))
   cfg = dict(R.PLAYGROUND_PANDA_PICK_CUBE, eval_episodes=8)
@@ -305,11 +305,72 @@ def test_export_policy_writes_brax_weights_that_every_reader_of_ours_takes(monke
   assert got.seed == 7 and got.meta["kind"] == "brax_ppo" and got.meta["env_steps"] == 123
   assert got.meta["init_seed"] == 4 and got.meta["config"]["damage_weight"] == 2.0
   assert got.meta["config"]["max_grad_norm"] is None  # the config records what brax ran, not our preset
+  assert got.meta["value_state"] is False
   for x, y in zip(jax.tree.leaves(got.params), jax.tree.leaves(brax_params[:2]), strict=True):
     np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
   assert R.check_init(path, None, "pick_egg") == (path, 7)
   with pytest.raises(ValueError, match="made for task 'pick_egg'"):
     R.check_init(path, None, "place_plate")
+
+
+def _exported_with_value(monkeypatch, tmp_path, step=123):
+  """A brax run of pick_egg (w = 2, seed 7) exported with a value function of the recipe's shape."""
+  a = R.parse_args(["--task", "pick_egg", "--init-from", EGG, "--init-seed", "4", "--export-policy"])
+  env = R.tasks.make("pick_egg", **a.settings)
+  obs_size = int(jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs.shape[-1])
+  value = R.network_factory(None)(obs_size, int(env.action_size)).value_network.init(jax.random.PRNGKey(5))
+  params = (*load_policy(EGG, env, seed=4).params, value)
+  _brax_final(monkeypatch, params, step=step)
+  path = str(tmp_path / R.os.path.basename(R.policy_path("stem", 2.0, 7)))
+  cfg = dict(R.PLAYGROUND_PANDA_PICK_CUBE, eval_episodes=8)
+  R.train_one("pick_egg", 2.0, 7, cfg, None, a.settings, init=a.init, export=path)
+  return path, env, params, cfg, a.settings
+
+
+def test_continue_from_restores_the_whole_run_and_counts_on(monkeypatch, tmp_path):
+  """--continue-from: brax gets the exported normaliser, policy and value function (restore_value_fn), and the
+  row's env steps and seconds count on from the first call's; the continued export says what it continued."""
+  path, env, params, cfg, settings = _exported_with_value(monkeypatch, tmp_path)
+  for x, y in zip(jax.tree.leaves(R.continued_params(path, env, cfg)), jax.tree.leaves(params), strict=True):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+  cont = R.check_continue(path, "pick_egg", settings, None, [2.0], [7], cfg, None)
+  got = {}
+
+  def fake_train(progress_fn, policy_params_fn, **kw):
+    got.update(kw)
+    for step in (0, 50):
+      progress_fn(step, {"eval/episode_reward": 1.0})
+      policy_params_fn(step, lambda *a, **k: None, params)
+
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  again = str(tmp_path / "again.npz")
+  row = R.train_one("pick_egg", 2.0, 7, cfg, None, settings, export=again, cont=cont)
+  assert got["restore_value_fn"] is True and len(got["restore_params"]) == 3
+  first = R.ckpt.read_meta(path)
+  assert row["env_steps"] == 123 + 50 and [c["env_steps"] for c in row["curve"]] == [123, 173]
+  assert row["continued_from"] == {"file": os.path.basename(path), "env_steps": 123,
+                                   "train_wall_s": first["train_wall_s"]}
+  assert row["train_wall_s"] >= first["train_wall_s"] and row["curve"][0]["wall_s"] >= first["train_wall_s"]
+  meta = R.ckpt.read_meta(again)
+  assert meta["env_steps"] == 173 and meta["continued_from"] == os.path.basename(path) and meta["value_state"]
+  assert "continued from" in R._std_label(row) and R._key(row) != R._key({k: v for k, v in row.items()
+                                                                          if k != "continued_from"})
+
+
+def test_continue_from_refuses_another_run_naming_the_flag(monkeypatch, tmp_path):
+  path, env, params, cfg, settings = _exported_with_value(monkeypatch, tmp_path)
+  ok = ("pick_egg", settings, None, [2.0], [7], cfg, None)
+  for change, says in ((dict(weights=[0.0]), "damage weights"), (dict(seeds=[1]), "seeds"),
+                       (dict(settings=dict(settings, start="pregrasp")), "task settings"),
+                       (dict(cfg=dict(cfg, num_envs=64)), "num_envs"),
+                       (dict(init=(EGG, 4)), "not both")):
+    args = dict(zip(("task", "settings", "eval_settings", "weights", "seeds", "cfg", "init"), ok), **change)
+    with pytest.raises(ValueError, match=f"^continue_from: .*{says}"):
+      R.check_continue(path, **args)
+  with pytest.raises(ValueError, match="^continue_from: .*not a run this script exported"):
+    R.check_continue(EGG, *ok)
+  with pytest.raises(ValueError, match="^continue_from: no file"):
+    R.check_continue(str(tmp_path / "none.npz"), *ok)
 
 
 def test_export_policy_never_replaces_an_earlier_runs_weights(tmp_path):
