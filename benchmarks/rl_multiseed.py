@@ -425,12 +425,11 @@ def eval_overrides(task: str, task_settings: str | None, eval_settings: str) -> 
 
   if ":" in task:
     raise ValueError("only for registered tasks, not package.module:EnvClass")
-  train = tasks.rl_settings(task, task_settings)
-  merged = tasks.settings_over(task, train, eval_settings, "eval_task_settings")
+  tasks.settings_over(task, tasks.rl_settings(task, task_settings), eval_settings, "eval_task_settings")  # checks
   extra = json.loads(eval_settings)
   if any(k in extra for k in ("damage_weight", "obs_mode")):
     raise ValueError("damage_weight comes from the methods and obs_mode from --obs-mode")
-  return {k: v for k, v in merged.items() if k in extra}
+  return extra
 
 
 def run_method(name: str, args, command: str, work: str) -> dict:
