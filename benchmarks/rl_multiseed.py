@@ -145,6 +145,9 @@ def method_spec(name: str, args) -> dict:
                 target_kl_rule=args.target_kl_rule)
   if args.policy_std is not None:
     spec = dict(spec, label=spec["label"] + f", std a {args.policy_std}", policy_std=args.policy_std)
+  if args.redraw_starts_steps:
+    spec = dict(spec, label=spec["label"] + f", starts redrawn every {args.redraw_starts_steps:.3g} steps",
+                redraw_starts_steps=int(args.redraw_starts_steps))
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
@@ -204,6 +207,10 @@ def parse(argv):
                       "--damage-weight (train/config.py, the penalty schedule)")
   p.add_argument("--damage-ramp-steps", type=float, default=0.0,
                  help="penalty method: after the warm-up, w rises linearly to --damage-weight over this many env steps")
+  p.add_argument("--redraw-starts-steps", type=float, default=0.0,
+                 help="every method: env steps per seed between fresh starts of every training env, cutting the "
+                      "episodes under way, as brax's num_resets_per_eval (train/config.py); 0 (default): each env "
+                      "replays the start of its first reset")
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
@@ -323,6 +330,8 @@ def parse(argv):
       p.error(f"--eval-task-settings: {e}")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
+  if not (args.redraw_starts_steps >= 0 and float(args.redraw_starts_steps).is_integer()):
+    p.error(f"--redraw-starts-steps: a whole number of env steps >= 0, got {args.redraw_starts_steps}")
   for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps)):
     if not v >= 0:
       p.error(f"{flag}: must be >= 0, got {v}")

@@ -171,7 +171,9 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
         f"w ramped over {kw['damage_ramp_steps'] / 1e6:g} M" if kw.get("damage_ramp_steps") else "",
         f"critic warm-up {kw['critic_warmup_iterations']} iterations" if kw.get("critic_warmup_iterations") else "",
         "lr annealed" if kw.get("anneal_learning_rate") else "",
-        "entropy annealed" if kw.get("anneal_entropy") else "") if x)
+        "entropy annealed" if kw.get("anneal_entropy") else "",
+        f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "")
+        if x)
     head = (r.get("eval_actions") or ["mode"])[0]
     for p in r["per_seed"]:
       runs.append(dict(trainer=trainer, reward=_reward(kw.get("damage_weight", 0.0), r["method"], r["label"]),

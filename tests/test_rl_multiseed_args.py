@@ -35,6 +35,9 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--anneal-lr"], "--anneal-lr"),  # over the default 1e9 steps it would barely decay
     (["--target-kl-rule", "batch"], "--target-kl-rule"),
     (["--policy-std", "global"], "--policy-std"),
+    (["--redraw-starts-steps", "-1"], "--redraw-starts-steps"),
+    (["--redraw-starts-steps", "nan"], "--redraw-starts-steps"),
+    (["--redraw-starts-steps", "1.5"], "--redraw-starts-steps"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -218,6 +221,14 @@ def test_anneal_entropy_reaches_the_playground_methods_and_needs_a_horizon(capsy
   with pytest.raises(SystemExit):
     rl_multiseed.parse(["--methods", "penalty", "--anneal-entropy"])
   assert "--anneal-entropy: the coefficient decays to 0 over --timesteps" in capsys.readouterr().err
+
+
+def test_redraw_starts_reaches_every_method_and_its_label():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty,paper", "--redraw-starts-steps", "327680"])
+  for m in ("task_only", "penalty", "paper"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert spec["redraw_starts_steps"] == 327680 and "starts redrawn every 3.28e+05 steps" in spec["label"]
+  assert "redraw_starts_steps" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
 
 
 def test_target_kl_rule_reaches_the_paper_methods_only():

@@ -317,10 +317,11 @@ def test_cli_errors_and_flags(capsys):
   assert "budget:" in capsys.readouterr().err
   args, config = cli.split_args(vars(cli.build_parser().parse_args(
       ["--task", "t", "--out", "o", "--seeds", "0,1,2", "--preset", "paper", "--multiplier", "pid",
-       "--init-log-std=-0.5,-1.5", "--timesteps", "1e6", "--anneal-entropy", "true"])))
+       "--init-log-std=-0.5,-1.5", "--timesteps", "1e6", "--anneal-entropy", "true",
+       "--redraw-starts-steps", "3.2768e5"])))
   assert args["seeds"] == (0, 1, 2) and args["preset"] == "paper"
   assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000,
-                    "anneal_entropy": True}
+                    "anneal_entropy": True, "redraw_starts_steps": 327680}
 
 
 def test_cli_eval_task_arg_is_checked_before_compiling(capsys, tmp_path):
@@ -532,3 +533,25 @@ def test_cli_init_seed_is_checked_before_anything_runs(tmp_path, capsys):
   err = capsys.readouterr().err
   assert "--init-seed: 9 is not a seed of" in err and "(its seeds: 3, 4, 5)" in err
   assert not os.path.exists(out)
+
+
+def test_redraw_starts_gives_every_env_a_fresh_start(env):
+  """Off (the default), each training env replays the start of its first reset for the whole run (brax's
+  AutoResetWrapper restores it at every episode end). With ``redraw_starts_steps`` every env gets a fresh
+  start at each positive multiple of that many env steps, cutting the episodes under way (uncounted), as
+  brax's ``num_resets_per_eval`` does; before the first redraw the run is exactly the run without it."""
+  kw = dict(seed=0, eval_every=ITER, **TINY)
+  first = lambda res: np.asarray(res.train_state.env_state.info["first_pipeline_state"].qpos)  # noqa: E731
+  off1, off3 = train.train(env, num_timesteps=ITER, **kw), train.train(env, num_timesteps=3 * ITER, **kw)
+  np.testing.assert_array_equal(first(off1), first(off3))  # the same 16 starts, however long the run
+  on1 = train.train(env, num_timesteps=ITER, redraw_starts_steps=ITER, **kw)
+  untimed = lambda res: [{k: v for k, v in r.items() if k != "wall_time"} for r in res.history]  # noqa: E731
+  assert untimed(on1) == untimed(off1) and on1.config.redraw_starts_iterations == 1
+  on3 = train.train(env, num_timesteps=3 * ITER, redraw_starts_steps=ITER, **kw)
+  assert np.all(first(on3) != first(off3))  # every env's start drawn again (uniform x0: never equal)
+  # episodes of 24 steps, cut every 8: none ends, none is counted; without the redraws the first ends at step 24
+  assert [r["train/episodes"] for r in on3.history] == [0.0] * 3
+  assert off3.history[-1]["train/episodes"] > 0
+  with pytest.raises(ValueError, match="^redraw_starts_steps:"):
+    train.PPOConfig(redraw_starts_steps=-1).validate()
+  assert train.PPOConfig.from_json({}).redraw_starts_steps == 0  # runs from before: fixed starts

@@ -129,6 +129,8 @@ CONFIG_FLAGS = (
     ("--eval-every", "eval_every", _int, "env steps between evaluations (0: at the end)"),
     ("--checkpoint-every", "checkpoint_every", _int, "env steps between checkpoints (0: at the end)"),
     ("--eval-envs", "num_eval_envs", _int, "deterministic evaluation episodes per seed"),
+    ("--redraw-starts-steps", "redraw_starts_steps", _int, "env steps per seed between fresh starts of every "
+     "training env, cutting the episodes under way (brax's num_resets_per_eval); 0: each env replays its first start"),
     ("--critic-warmup", "critic_warmup_iterations", _int, "first iterations in which only the critic learns "
      "(for --init-from)"),
     ("--update-normalizer", "update_normalizer", _bool, "false: keep the observation statistics the run "

@@ -141,6 +141,12 @@ class PPOConfig:
   # First iterations in which only the critic learns (the actor is held): for a run started from a
   # pre-trained actor (train(init_from=...)), whose fresh critic would otherwise steer it with noise.
   critic_warmup_iterations: int = 0
+  # Env steps per seed between fresh draws of every training env's start (initial state, task constants,
+  # randomised damage parameters), cutting the episodes under way, as brax's ``ppo.train`` does with
+  # ``num_resets_per_eval`` > 0 (its Playground recipe on our tasks: every 2–5 iterations). 0: never, so
+  # each env replays the start of its first reset for the whole run (brax's AutoResetWrapper restores that
+  # first state at every episode end): 2048 fixed starts per seed with the playground preset.
+  redraw_starts_steps: int = 0
   seeds: tuple[int, ...] = (0,)
 
   @classmethod
@@ -163,6 +169,11 @@ class PPOConfig:
     """``(damage_warmup_steps, damage_ramp_steps)`` in iterations, rounded up."""
     per = self.steps_per_iteration
     return -(-self.damage_warmup_steps // per), -(-self.damage_ramp_steps // per)
+
+  @property
+  def redraw_starts_iterations(self) -> int:
+    """``redraw_starts_steps`` in iterations (nearest, at least 1); 0 when off."""
+    return self.interval_iterations(self.redraw_starts_steps)
 
   @property
   def budget_anneal_iterations(self) -> int:
@@ -231,7 +242,7 @@ class PPOConfig:
     if (self.minibatch_sequences * self.num_minibatches) % self.num_envs:
       raise ValueError(f"num_envs: {self.num_envs} must divide batch_size·num_minibatches = "
                        f"{self.minibatch_sequences}·{self.num_minibatches}")
-    for name in ("eval_every", "checkpoint_every", "critic_warmup_iterations"):
+    for name in ("eval_every", "checkpoint_every", "critic_warmup_iterations", "redraw_starts_steps"):
       v = getattr(self, name)
       if not is_int(v) or v < 0:
         raise ValueError(f"{name}: must be an integer >= 0, got {v!r}")
@@ -303,7 +314,8 @@ class PPOConfig:
     old = {"anneal_learning_rate": False, "target_kl": None, "init_log_std": None, "multiplier": "lagrangian",
            "value_cost": 0.5, "budget_anneal_steps": 0,
            "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False,
-           "target_kl_rule": "minibatch", "policy_std": "state", "anneal_entropy": False}
+           "target_kl_rule": "minibatch", "policy_std": "state", "anneal_entropy": False,
+           "redraw_starts_steps": 0}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

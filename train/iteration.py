@@ -116,6 +116,9 @@ def shape_reward(r_task, cost, damage_weight, lam):
   return (r_task - (damage_weight + lam) * cost) / (1.0 + lam)
 
 
+REDRAW_STREAM = 0x5EED  # folded into an iteration's key for its fresh starts (Trainer._redraw_starts)
+
+
 class Trainer:
   """The static parts of a run (envs, networks, optimizer); every method is a pure function."""
 
@@ -216,14 +219,30 @@ class Trainer:
   def collect(self, ts: TrainState):
     """Roll out R·T steps of all envs with the stochastic policy → (ts, data [R·E, T, ...], ended sums)."""
     key, k_unroll = jax.random.split(ts.rng)
+    env_state, acc = ts.env_state, ts.episode
+    if self.cfg.redraw_starts_iterations:  # a key of its own: the run's stream is the same with it off
+      env_state, acc = self._redraw_starts(ts, jax.random.fold_in(ts.rng, REDRAW_STREAM))
     policy = self.make_policy((ts.normalizer, ts.params.policy))
     step = functools.partial(self._env_step, policy)
     keys = jax.random.split(self._local(k_unroll), (self.cfg.num_rollouts, self.cfg.unroll_length))
     (env_state, acc), (data, ended) = jax.lax.scan(
-        lambda carry, k: jax.lax.scan(step, carry, k), (ts.env_state, ts.episode), keys)
+        lambda carry, k: jax.lax.scan(step, carry, k), (env_state, acc), keys)
     # [R, T, E, ...] → [R, E, T, ...] → [R·E, T, ...]: sequences first, as the loss expects.
     data = jax.tree.map(lambda x: jnp.swapaxes(x, 1, 2).reshape((-1,) + x.shape[1:2] + x.shape[3:]), data)
     return ts.replace(env_state=env_state, episode=acc, rng=key), data, self._psum(jax.tree.map(jnp.sum, ended))
+
+  def _redraw_starts(self, ts: TrainState, key):
+    """``(env_state, episode sums)`` to roll out from: every iteration that is a positive multiple of
+    ``redraw_starts_iterations``, a fresh reset of all E envs of this shard (new starts, task constants and
+    damage parameters; the episodes under way are cut, uncounted, as brax's ``num_resets_per_eval`` cuts
+    them); else ``ts``'s. A select, not a cond: under the seed vmap a cond computes both branches anyway, and
+    one reset costs about one physics step of the iteration's ``unroll_length·num_rollouts``."""
+    n_envs = ts.episode.cost.shape[0]
+    fresh = self.env.reset(jax.random.split(self._local(key), n_envs))
+    due = (ts.iteration > 0) & (ts.iteration % self.cfg.redraw_starts_iterations == 0)
+    pick = lambda new, old: jnp.where(due, new, old).astype(old.dtype)  # noqa: E731
+    zeros = jax.tree.map(jnp.zeros_like, ts.episode)
+    return jax.tree.map(pick, fresh, ts.env_state), jax.tree.map(pick, zeros, ts.episode)
 
   # -- learning -------------------------------------------------------------
   def _minibatch(self, normalizer, weights, start_policy, carry, inp):
