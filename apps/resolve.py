@@ -264,10 +264,16 @@ def add_task_override_arguments(ap) -> None:
                        "a checkpoint policy brings its own, which these may add to but not change")
 
 
+# Task keywords that decide a policy's observation and action layout: a checkpoint's own cannot be overridden.
+POLICY_INTERFACE = ("obs_mode", "robot")
+
+
 def task_overrides(task: str, trained: Optional[dict] = None, robot: Optional[str] = None, task_args=()) -> dict:
   """``tasks.make`` keywords for a command: ``trained``, the task overrides a checkpoint policy was trained
   with (:func:`policy_task_kwargs`: its obs_mode …, so the env matches the policy), then ``--task-arg``
-  items and ``--robot``. A trained value cannot be changed (``ValueError`` naming the flag); everything is
+  items and ``--robot``. A trained value of what the policy sees and moves (:data:`POLICY_INTERFACE`: its
+  observation layout, its robot) cannot be changed (``ValueError`` naming the flag); the others can (where an
+  episode starts, the counter …: scoring a policy in another setting is what they are for); everything is
   checked by :func:`make_task`."""
   out = dict(trained or {})
   given = tasks.parse_task_args(task_args)
@@ -279,7 +285,7 @@ def task_overrides(task: str, trained: Optional[dict] = None, robot: Optional[st
     flag = "--robot" if list(given) == ["robot"] else "--task-arg"
     raise ValueError(f"{flag}: built-in scene {task!r} takes no task arguments")
   for key, value in given.items():
-    if key in out and out[key] != value:
+    if key in out and out[key] != value and key in POLICY_INTERFACE:
       flag = "--robot" if key == "robot" and robot is not None else "--task-arg"
       raise ValueError(f"{flag}: the checkpoint was trained with {key}={out[key]!r}; got {value!r}")
   return {**out, **given}

@@ -25,6 +25,9 @@ def test_robot_and_task_args_merge_over_a_checkpoints():
   with pytest.raises(ValueError, match="--robot: the checkpoint was trained with robot='gripper'"):
     R.task_overrides("place_plate", {"robot": "gripper"}, "panda")
   assert trained == {"obs_mode": "paper"}  # not modified
+  # what is not the policy's interface may be changed: a Shelve Item policy scored from its training starts
+  assert R.task_overrides("shelve_item", {"robot": "gripper", "start": "in_front"}, None, ['start="route"']) == {
+      "robot": "gripper", "start": "route"}
 
 
 def test_conflicting_or_misplaced_flags_name_themselves():
