@@ -261,7 +261,7 @@ def add_task_override_arguments(ap) -> None:
   ap.add_argument("--robot", default=None, help="robot of a registry task, e.g. panda (default: the task's)")
   ap.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                   help="task keyword argument (repeatable), e.g. --task-arg obs_mode=paper --task-arg start=in_hand; "
-                       "a checkpoint policy brings its own, which these may add to but not change")
+                       "a checkpoint policy brings its own, which these may add to or change, except its obs_mode and robot")
 
 
 # Task keywords that decide a policy's observation and action layout: a checkpoint's own cannot be overridden.

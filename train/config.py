@@ -143,7 +143,7 @@ class PPOConfig:
   critic_warmup_iterations: int = 0
   # Env steps per seed between fresh draws of every training env's start (initial state, task constants,
   # randomised damage parameters), cutting the episodes under way, as brax's ``ppo.train`` does with
-  # ``num_resets_per_eval`` > 0 (its Playground recipe on our tasks: every 2–5 iterations). 0: never, so
+  # ``num_resets_per_eval`` > 0 (our Brax runs of its Playground recipe: every 1–3 iterations). 0: never, so
   # each env replays the start of its first reset for the whole run (brax's AutoResetWrapper restores that
   # first state at every episode end): 2048 fixed starts per seed with the playground preset.
   redraw_starts_steps: int = 0
