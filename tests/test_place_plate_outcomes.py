@@ -20,7 +20,8 @@ POLICY = os.path.join(BENCHMARKS, "results", "rl_brax_place_plate_box_h200_alone
     (["--policies", POLICY + "#4", "--episodes", "0"], "episodes"),
     (["--policies", POLICY + "#4", "--clearance", "nan"], "clearance"),
     (["--policies", POLICY + "#4", "--clearance", "0.2"], "clearance"),
-    (["--policies", POLICY + "#4", "--task-arg", "counter=\"plane\""], "trained with counter='box'"),
+    (["--policies", POLICY + "#4", "--task-arg", "obs_mode=\"full\""], "trained with obs_mode='paper'"),
+    (["--policies", POLICY + "#4", "--task-arg", "robot=\"panda\""], "trained with robot='gripper'"),
     (["--policies", POLICY + "#4", "--task-arg", "hand_speed=-1"], "hand_speed"),
 ])
 def test_refuses_bad_values_before_anything_compiles(argv, says, tmp_path, capsys):
