@@ -145,6 +145,10 @@ def method_spec(name: str, args) -> dict:
                 target_kl_rule=args.target_kl_rule)
   if args.policy_std is not None:
     spec = dict(spec, label=spec["label"] + f", std a {args.policy_std}", policy_std=args.policy_std)
+  if args.max_grad_norm is not None:
+    clip = None if args.max_grad_norm == "none" else args.max_grad_norm
+    spec = dict(spec, label=spec["label"] + (", no gradient clipping" if clip is None else f", grad-norm clip {clip:g}"),
+                max_grad_norm=clip)
   if args.redraw_starts_steps:
     spec = dict(spec, label=spec["label"] + f", starts redrawn every {args.redraw_starts_steps:.3g} steps",
                 redraw_starts_steps=int(args.redraw_starts_steps))
@@ -211,6 +215,9 @@ def parse(argv):
                  help="every method: env steps per seed between fresh starts of every training env, cutting the "
                       "episodes under way, as brax's num_resets_per_eval (train/config.py); 0 (default): each env "
                       "replays the start of its first reset")
+  p.add_argument("--max-grad-norm", default=None, metavar="X|none",
+                 help="every method: per-network gradient-norm clip, or none (brax's ppo.train default, which "
+                      "Playground's PandaPickCube recipe keeps) (default: the preset's)")
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
@@ -330,6 +337,14 @@ def parse(argv):
       p.error(f"--eval-task-settings: {e}")
   if not args.budget_anneal_steps >= 0:
     p.error(f"--budget-anneal-steps: must be >= 0, got {args.budget_anneal_steps}")
+  if args.max_grad_norm is not None:
+    text = args.max_grad_norm
+    try:
+      args.max_grad_norm = "none" if text.lower() == "none" else float(text)
+    except ValueError:
+      p.error(f"--max-grad-norm: a number > 0 or none, got {text!r}")
+    if args.max_grad_norm != "none" and not (math.isfinite(args.max_grad_norm) and args.max_grad_norm > 0):
+      p.error(f"--max-grad-norm: a number > 0 or none, got {text!r}")
   if not (args.redraw_starts_steps >= 0 and float(args.redraw_starts_steps).is_integer()):
     p.error(f"--redraw-starts-steps: a whole number of env steps >= 0, got {args.redraw_starts_steps}")
   for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps)):

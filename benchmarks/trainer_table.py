@@ -172,7 +172,9 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
         f"critic warm-up {kw['critic_warmup_iterations']} iterations" if kw.get("critic_warmup_iterations") else "",
         "lr annealed" if kw.get("anneal_learning_rate") else "",
         "entropy annealed" if kw.get("anneal_entropy") else "",
-        f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "")
+        f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "",
+        ("no gradient clipping" if kw["max_grad_norm"] is None else f"grad-norm clip {kw['max_grad_norm']:g}")
+        if "max_grad_norm" in kw else "")
         if x)
     head = (r.get("eval_actions") or ["mode"])[0]
     for p in r["per_seed"]:

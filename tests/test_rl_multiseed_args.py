@@ -38,6 +38,9 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--redraw-starts-steps", "-1"], "--redraw-starts-steps"),
     (["--redraw-starts-steps", "nan"], "--redraw-starts-steps"),
     (["--redraw-starts-steps", "1.5"], "--redraw-starts-steps"),
+    (["--max-grad-norm", "off"], "--max-grad-norm"),
+    (["--max-grad-norm", "0"], "--max-grad-norm"),
+    (["--max-grad-norm", "nan"], "--max-grad-norm"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -229,6 +232,16 @@ def test_redraw_starts_reaches_every_method_and_its_label():
     spec = rl_multiseed.method_spec(m, a)
     assert spec["redraw_starts_steps"] == 327680 and "starts redrawn every 3.28e+05 steps" in spec["label"]
   assert "redraw_starts_steps" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
+
+
+def test_max_grad_norm_reaches_every_method_none_meaning_no_clipping():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty", "--max-grad-norm", "none"])
+  for m in ("task_only", "penalty"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert "max_grad_norm" in spec and spec["max_grad_norm"] is None and "no gradient clipping" in spec["label"]
+  spec = rl_multiseed.method_spec("penalty", rl_multiseed.parse(["--max-grad-norm", "0.5"]))
+  assert spec["max_grad_norm"] == 0.5 and "grad-norm clip 0.5" in spec["label"]
+  assert "max_grad_norm" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
 
 
 def test_target_kl_rule_reaches_the_paper_methods_only():

@@ -322,6 +322,12 @@ def test_cli_errors_and_flags(capsys):
   assert args["seeds"] == (0, 1, 2) and args["preset"] == "paper"
   assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000,
                     "anneal_entropy": True, "redraw_starts_steps": 327680}
+  _, config = cli.split_args(vars(cli.build_parser().parse_args(["--task", "t", "--max-grad-norm", "none"])))
+  assert config == {"max_grad_norm": None}  # brax's default: no clipping (not "the preset's")
+  assert train.PPOConfig.preset("playground", **config).validate().max_grad_norm is None
+  with pytest.raises(SystemExit):
+    cli.build_parser().parse_args(["--task", "t", "--max-grad-norm", "off"])
+  assert "--max-grad-norm: a number or none" in capsys.readouterr().err
 
 
 def test_cli_eval_task_arg_is_checked_before_compiling(capsys, tmp_path):

@@ -40,7 +40,7 @@ def sources(tmp_path):
                    _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.95), (1.0, 0.9)), (1, (1.0, 0.5), (1.0, 0.85))]),
                    _ours_row("pid", "playground", None, [(0, (1.0, 0.9), (1.0, 0.9))],
                              label="PID-Lagrangian (ĉ=1; λ0=2, K=0.01) + cost critic", cost_critic=True,
-                             redraw_starts_steps=327680),
+                             redraw_starts_steps=327680, max_grad_norm=None),
                    _ours_row("paper", "paper", 2.0, [(0, (0.1, 0.0), (0.1, 0.0))])]}
   brax = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
           "rows": [_brax_row(0.0, 0, (1.0, 0.3)), _brax_row(2.0, 0, (1.0, 0.99), (1.0, 0.98)),
@@ -73,6 +73,8 @@ def test_groups_score_each_run_by_the_action_and_count_the_bar(sources, tmp_path
   assert "cost critic" in g[(ours, "PID-Lagrangian (ĉ=1; λ0=2, K=0.01)")]["settings"]
   assert "starts redrawn every 0.32768 M steps" in g[(ours, "PID-Lagrangian (ĉ=1; λ0=2, K=0.01)")]["settings"]
   assert "redrawn" not in g[(ours, "damage penalty, w = 2")]["settings"]
+  assert "no gradient clipping" in g[(ours, "PID-Lagrangian (ĉ=1; λ0=2, K=0.01)")]["settings"]
+  assert "clipping" not in g[(ours, "damage penalty, w = 2")]["settings"]
   md = open(out + ".md").read()
   assert "| 1 / 2 |" in md and "`rl_brax_ppo w2.0 s1`" in md and "python benchmarks/trainer_table.py" in md
 

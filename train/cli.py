@@ -74,6 +74,16 @@ def _floats(text: str) -> tuple[float, ...]:
     raise argparse.ArgumentTypeError(f"comma-separated numbers, got {text!r}") from None
 
 
+def _float_or_none(text: str) -> float | None:
+  """A number, or ``none`` (e.g. no gradient clipping: brax's ``ppo.train`` default)."""
+  if text.lower() == "none":
+    return None
+  try:
+    return float(text)
+  except ValueError:
+    raise argparse.ArgumentTypeError(f"a number or none, got {text!r}") from None
+
+
 def _bool(text: str) -> bool:
   if text.lower() in ("1", "true", "yes", "on"):
     return True
@@ -120,7 +130,8 @@ CONFIG_FLAGS = (
     ("--anneal-entropy", "anneal_entropy", _bool, "true: the entropy coefficient decays linearly to 0 over --timesteps"),
     ("--value-cost", "value_cost", float, "weight of the value loss"),
     ("--reward-scaling", "reward_scaling", float, None),
-    ("--max-grad-norm", "max_grad_norm", float, "per-network gradient-norm clip"),
+    ("--max-grad-norm", "max_grad_norm", _float_or_none, "per-network gradient-norm clip; none: no clipping "
+     "(brax's ppo.train default, which Playground's PandaPickCube recipe keeps)"),
     ("--target-kl", "target_kl", float, "stop an iteration's epochs early once the update's KL is too large"),
     ("--policy-std", "policy_std", str, "state (brax: the std an output of the actor, per state) or parameter "
      "(one learned log-std per action dimension, as in SB3 and CleanRL)"),
@@ -189,7 +200,8 @@ def build_parser() -> Parser:
 def split_args(args: dict) -> tuple[dict, dict]:
   """argparse namespace → (train() keywords, PPOConfig overrides given on the command line)."""
   fields = {dest for _, dest, _, _ in CONFIG_FLAGS}
-  config = {k: v for k, v in args.items() if k in fields and v is not None}  # SUPPRESS: absent when not given
+  # SUPPRESS: absent when not given, so a None here was given (--max-grad-norm none)
+  config = {k: v for k, v in args.items() if k in fields}
   rest = {k: v for k, v in args.items() if k not in fields}
   return rest, config
 
