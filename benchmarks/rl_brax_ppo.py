@@ -53,10 +53,10 @@ brax restores weights only, so its optimizer state and environments start afresh
 
     python benchmarks/rl_brax_ppo.py --task shelve_item --task-settings '{"start":"route"}' \
         --eval-task-settings '{"start":"in_front"}' --damage-weights 2 --seeds 0 --num-timesteps 30000000 \
-        --num-evals 11 --budget-seconds 400 --init-log-std=-0.5,-1.5 --eval-actions mode,sample \
-        --export-policy --out $OUT/rl_brax_shelve_item_route_a       # call 1
-    python benchmarks/rl_brax_ppo.py … --continue-from rl_brax_shelve_item_route_a_w2_s0_policy.npz \
-        --export-policy --out $OUT/rl_brax_shelve_item_route_b       # call 2, the first call's file carried
+        --num-evals 16 --budget-seconds 380 --curve-episodes 128 --init-log-std=-0.5,-1.5 \
+        --eval-actions mode,sample --export-policy --out $OUT/rl_brax_shelve_item_route_w2_a   # call 1
+    python benchmarks/rl_brax_ppo.py … the same … --continue-from rl_brax_shelve_item_route_w2_a_w2_s0_policy.npz \
+        --export-policy --out $OUT/rl_brax_shelve_item_route_w2_b   # call 2, the first call's file carried
 
 CPU plumbing check (learns nothing)::
 
