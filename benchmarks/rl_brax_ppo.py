@@ -165,7 +165,7 @@ def export_policy(path: str, params, env, task: str, settings: dict, weight: flo
       num_minibatches=cfg["num_minibatches"], num_updates_per_batch=cfg["num_updates_per_batch"],
       unroll_length=cfg["unroll_length"], learning_rate=cfg["learning_rate"], entropy_cost=cfg["entropy_cost"],
       discounting=cfg["discounting"], reward_scaling=cfg["reward_scaling"],
-      max_grad_norm=None,  # brax's ppo.train default, which the recipe keeps (ours clips at 1)
+      max_grad_norm=cfg.get("max_grad_norm"),  # brax's default None (the recipe's) unless --max-grad-norm
       init_log_std=None if cfg.get("init_log_std") is None else tuple(cfg["init_log_std"]))
   meta = {"task": task, "task_kwargs": settings, "kind": "brax_ppo", "config": ours.to_json(),
           "obs_size": obs_size, "action_size": int(env.action_size), "env_steps": int(env_steps),
@@ -257,7 +257,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         batch_size=cfg["batch_size"], num_minibatches=cfg["num_minibatches"],
         num_updates_per_batch=cfg["num_updates_per_batch"], num_resets_per_eval=cfg["num_resets_per_eval"],
         normalize_observations=cfg["normalize_observations"], reward_scaling=cfg["reward_scaling"],
-        network_factory=network_factory(cfg.get("init_log_std")),
+        network_factory=network_factory(cfg.get("init_log_std")), max_grad_norm=cfg.get("max_grad_norm"),
         num_evals=cfg["num_evals"], num_eval_envs=cfg["num_eval_envs"], seed=seed,
         progress_fn=progress, policy_params_fn=keep_params, eval_env=eval_env, **restore)
   except _Budget:
@@ -304,8 +304,10 @@ def _std_label(row: dict) -> str:
     return _std_label(row) + f", continued from {c['file']} ({c['env_steps'] / 1e6:.1f} M)"
   if row.get("init_from"):
     return f", actor from {row['init_from']} seed {row['init_seed']}"
-  std = row.get("recipe", {}).get("init_log_std")
-  return "" if std is None else f", initial log-std {std[0]:g}/{std[1]:g}"
+  recipe = row.get("recipe", {})
+  std, clip = recipe.get("init_log_std"), recipe.get("max_grad_norm")
+  return ("" if std is None else f", initial log-std {std[0]:g}/{std[1]:g}") + (
+      "" if clip is None else f", gradient norm clipped at {clip:g}")
 
 
 def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
@@ -354,6 +356,9 @@ def check_continue(path: str, task: str, settings: dict, eval_settings: dict | N
   for k in RECIPE_KEYS:
     if ours.get(k) != cfg[k]:
       raise ValueError(f"continue_from: {path} was trained with {k} = {ours.get(k)!r}; this call has {cfg[k]!r}")
+  if ours.get("max_grad_norm") != cfg.get("max_grad_norm"):
+    raise ValueError(f"continue_from: {path} was trained with max_grad_norm = {ours.get('max_grad_norm')!r}; "
+                     f"this call has {cfg.get('max_grad_norm')!r}")
   std = None if ours.get("init_log_std") is None else list(ours["init_log_std"])
   if std != (None if cfg.get("init_log_std") is None else list(cfg["init_log_std"])):
     raise ValueError(f"continue_from: {path} was trained with init_log_std {std}; this call has {cfg.get('init_log_std')}")
@@ -488,6 +493,8 @@ def parse_args(argv=None):
   p.add_argument("--num-evals", type=int, default=pc["num_evals"])
   p.add_argument("--num-eval-envs", type=int, default=pc["num_eval_envs"])
   p.add_argument("--num-resets-per-eval", type=int, default=pc["num_resets_per_eval"])
+  p.add_argument("--max-grad-norm", type=float, default=None, metavar="X",
+                 help="clip the gradient's global norm at X (default: none, the recipe's; ours clips at 1)")
   p.add_argument("--eval-episodes", type=int, default=1024)
   p.add_argument("--curve-episodes", type=int, default=256,
                  help="episodes scoring the policy at each of brax's evaluations (completion, safe completion, "
@@ -557,6 +564,8 @@ def parse_args(argv=None):
                      f"got {a.num_envs}")
   if a.budget_seconds is not None and a.budget_seconds <= 0:
     raise ValueError(f"budget_seconds: must be > 0, got {a.budget_seconds}")
+  if a.max_grad_norm is not None and not (np.isfinite(a.max_grad_norm) and a.max_grad_norm > 0):
+    raise ValueError(f"max_grad_norm: must be a finite number > 0, got {a.max_grad_norm}")
   if a.init_log_std is not None:
     a.init_log_std = tuple(_csv(a.init_log_std, float, "init_log_std"))
     if len(a.init_log_std) != 2 or not all(-5.0 <= v <= 2.0 for v in a.init_log_std):  # also refuses NaN
@@ -628,7 +637,8 @@ def main(argv=None) -> int:
   cfg = dict(PLAYGROUND_PANDA_PICK_CUBE, num_timesteps=a.num_timesteps, num_envs=a.num_envs,
              batch_size=a.batch_size, num_minibatches=a.num_minibatches, unroll_length=a.unroll_length,
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
-             eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}))
+             eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}),
+             **({} if a.max_grad_norm is None else {"max_grad_norm": a.max_grad_norm}))
   stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
   cont = None if a.continue_from is None else check_continue(
       a.continue_from, a.task, a.settings, a.eval_settings, a.weights, a.seed_list, cfg, a.init)

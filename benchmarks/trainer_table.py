@@ -131,6 +131,19 @@ def _budget(row: dict) -> str:
   return "" if n is None else f"--num-timesteps {n / 1e6:g} M"
 
 
+def _brax_changes(recipe: dict) -> str:
+  """Where a brax run left the Playground recipe beyond the std: brax's envs reset between epochs (10 per
+  evaluation) and its gradients unclipped, so runs with fixed starts or a clip are other runs."""
+  out = []
+  if recipe.get("num_resets_per_eval", 10) == 0:
+    out.append("fixed starts (no resets between epochs)")
+  elif recipe.get("num_resets_per_eval", 10) != 10:
+    out.append(f"{recipe['num_resets_per_eval']} resets per evaluation")
+  if recipe.get("max_grad_norm") is not None:
+    out.append(f"grad-norm clip {recipe['max_grad_norm']:g}")
+  return ", ".join(out)
+
+
 def _scores(by_action: dict | None, head: dict, head_action: str, action: str) -> dict | None:
   """The run's final evaluation by ``action``: its by-action entry, or the row itself when that is the action."""
   if by_action and action in by_action:
@@ -147,7 +160,8 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
       actor = ", ".join(x for x in (actor, "continued over calls") if x)
     s = _scores(r.get("by_action"), r, (r.get("eval_actions") or ["mode"])[0], action)
     runs.append(dict(trainer=BRAX, reward=_reward(r["damage_weight"]), seed=r["seed"], device=doc["device"],
-                     settings=_settings(_std(r.get("recipe", {}).get("init_log_std")), _budget(r), actor,
+                     settings=_settings(_std(r.get("recipe", {}).get("init_log_std")),
+                                        _brax_changes(r.get("recipe", {})), _budget(r), actor,
                                         _task_settings(r.get("task_settings", doc.get("task_settings")),
                                                        r.get("eval_task_settings"))),
                      env_steps=r["env_steps"], scores=s, command=r["command"], source=source,

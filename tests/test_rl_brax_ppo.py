@@ -363,6 +363,7 @@ def test_continue_from_refuses_another_run_naming_the_flag(monkeypatch, tmp_path
   for change, says in ((dict(weights=[0.0]), "damage weights"), (dict(seeds=[1]), "seeds"),
                        (dict(settings=dict(settings, start="pregrasp")), "task settings"),
                        (dict(cfg=dict(cfg, num_envs=64)), "num_envs"),
+                       (dict(cfg=dict(cfg, max_grad_norm=1.0)), "max_grad_norm"),
                        (dict(init=(EGG, 4)), "not both")):
     args = dict(zip(("task", "settings", "eval_settings", "weights", "seeds", "cfg", "init"), ok), **change)
     with pytest.raises(ValueError, match=f"^continue_from: .*{says}"):
@@ -371,6 +372,43 @@ def test_continue_from_refuses_another_run_naming_the_flag(monkeypatch, tmp_path
     R.check_continue(EGG, *ok)
   with pytest.raises(ValueError, match="^continue_from: no file"):
     R.check_continue(str(tmp_path / "none.npz"), *ok)
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf"])
+def test_bad_max_grad_norm_is_refused_naming_it(value):
+  with pytest.raises(ValueError, match="max_grad_norm"):
+    R.parse_args([f"--max-grad-norm={value}"])
+
+
+def test_max_grad_norm_reaches_brax_its_export_and_the_row_label(monkeypatch, tmp_path):
+  """--max-grad-norm 1: brax's ppo.train clips at 1 (stock: None), the exported config records it, and the
+  row says so; a clipped run cannot be continued as an unclipped one."""
+  got = {}
+
+  class Stop(Exception):
+    pass
+
+  def fake_train(**kw):
+    got.update(kw)
+    raise Stop
+
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  a = R.parse_args(["--task", "pick_egg"])
+  for clip in (None, 1.0):
+    cfg = dict(R.PLAYGROUND_PANDA_PICK_CUBE, **({} if clip is None else {"max_grad_norm": clip}))
+    with pytest.raises(Stop):
+      R.train_one("pick_egg", 2.0, 0, cfg, None, a.settings)
+    assert got["max_grad_norm"] == clip
+  assert R._std_label({"recipe": {"max_grad_norm": 1.0}}) == ", gradient norm clipped at 1"
+  assert R._std_label({"recipe": {}}) == ""
+  path, env, params, cfg, settings = _exported_with_value(monkeypatch, tmp_path)
+  clipped = str(tmp_path / "clipped.npz")
+  R.train_one("pick_egg", 2.0, 7, dict(cfg, max_grad_norm=1.0), None, settings, export=clipped)
+  assert R.ckpt.read_meta(clipped)["config"]["max_grad_norm"] == 1.0
+  assert R.ckpt.read_meta(path)["config"]["max_grad_norm"] is None
+  R.check_continue(clipped, "pick_egg", settings, None, [2.0], [7], dict(cfg, max_grad_norm=1.0), None)
+  with pytest.raises(ValueError, match="^continue_from: .*max_grad_norm"):
+    R.check_continue(clipped, "pick_egg", settings, None, [2.0], [7], cfg, None)
 
 
 def test_export_policy_never_replaces_an_earlier_runs_weights(tmp_path):

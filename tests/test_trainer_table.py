@@ -79,6 +79,25 @@ def test_groups_score_each_run_by_the_action_and_count_the_bar(sources, tmp_path
   assert "| 1 / 2 |" in md and "`rl_brax_ppo w2.0 s1`" in md and "python benchmarks/trainer_table.py" in md
 
 
+def test_brax_runs_off_the_recipe_are_their_own_groups(tmp_path):
+  """Fixed starts (num_resets_per_eval 0) and a gradient clip change brax's recipe: not pooled with stock runs."""
+  rows = [_brax_row(2.0, 0, (0.0, 0.0)), _brax_row(2.0, 1, (0.1, 0.0)),
+          dict(_brax_row(2.0, 0, (0.0, 0.0)), recipe={"num_resets_per_eval": 0}),
+          dict(_brax_row(2.0, 0, (1.0, 0.9)), recipe={"max_grad_norm": 1.0, "num_resets_per_eval": 10})]
+  path, out = str(tmp_path / "brax.json"), str(tmp_path / "table")
+  with open(path, "w") as f:
+    json.dump({"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "rows": rows}, f)
+  assert T.main(["--task", "place_plate", "--action", "mode", "--sources", path, "--out", out]) == 0
+  with open(out + ".json") as f:
+    groups = json.load(f)["groups"]
+  by = {g["settings"]: len(g["runs"]) for g in groups}
+  assert len(by) == 3, by
+  stock = [k for k in by if "fixed starts" not in k and "clip" not in k]
+  assert by[stock[0]] == 2
+  assert sum("fixed starts (no resets between epochs)" in k for k in by) == 1
+  assert sum("grad-norm clip 1" in k and "fixed" not in k for k in by) == 1
+
+
 def test_a_run_not_scored_by_the_action_is_counted_apart_not_guessed(sources, tmp_path):
   out = str(tmp_path / "table")
   T.main(["--task", "place_plate", "--action", "sample", "--sources", *sources, "--out", out])
