@@ -3,9 +3,13 @@
 ``DamageWrapper(env, ...)`` adds to ``state.info``:
 
 * ``link_health`` f32[L], ``entity_health`` f32[N] (100 = intact),
-* ``cost`` f32[] — total damage (health points, all links, all models) this step; it
-  counts what the models evaluate even after a link's health is clipped at 0, so
-  a CMDP budget keeps seeing continued abuse of a destroyed object,
+* ``cost`` f32[] — this step's damage in health points, summed over links. With
+  ``cost="damage"`` (the default) it is what the models evaluate, all models, even
+  beyond the health a link has left (a link at 0 keeps costing, so a CMDP budget sees
+  continued abuse of a destroyed object; one hard contact can cost thousands). With
+  ``cost="health_lost"`` it is the health the links actually lost this step
+  (Σ max(h(t−1) − h(t), 0)): at most 100 per link per step and per episode, so a
+  penalised reward stays on the task reward's scale,
 * ``damage`` — {"mechanical", "thermal", "fluid"} totals this step, f32[] each,
 * ``task_reward`` f32[] — the wrapped env's reward before shaping,
 * ``damage_episode`` — running episode statistics (DAMAGE_MODEL.md §7) plus
@@ -76,6 +80,7 @@ from mjx_damage.signals import LinkSignals
 ParamsFn = Callable[[jax.Array, DamageParams], DamageParams]
 
 ACTION_BOUNDS = (-1.0, 1.0)
+COST_SIGNALS = ("damage", "health_lost")  # what info["cost"] counts (DamageWrapper's cost=)
 
 
 def sanitise_action(action: jax.Array, lo: float = -1.0, hi: float = 1.0) -> tuple[jax.Array, jax.Array]:
@@ -127,6 +132,9 @@ class DamageWrapper(Wrapper):
     safe_threshold: entity health above which an episode counts as safe.
     action_bounds: (lo, hi) finite, lo < hi: the env's action range; actions
       are sanitised into it (:func:`sanitise_action`).
+    cost: what ``info["cost"]`` (and so the penalty and every episode cost) counts:
+      ``"damage"``, the models' damage, or ``"health_lost"``, the health the links
+      lost (bounded by 100 per link); see the module docstring.
   """
 
   def __init__(
@@ -141,8 +149,11 @@ class DamageWrapper(Wrapper):
       params_fn: Optional[ParamsFn] = None,
       safe_threshold: float = 95.0,
       action_bounds: tuple[float, float] = ACTION_BOUNDS,
+      cost: str = "damage",
   ):
     super().__init__(env)
+    if cost not in COST_SIGNALS:
+      raise ValueError(f"cost: must be one of {', '.join(COST_SIGNALS)}, got {cost!r}")
     if (not isinstance(action_bounds, (tuple, list)) or len(action_bounds) != 2
         or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) < float("inf")
                for v in action_bounds)
@@ -172,6 +183,7 @@ class DamageWrapper(Wrapper):
     self.params_fn = params_fn
     self.safe_threshold = float(safe_threshold)
     self.action_bounds = (float(action_bounds[0]), float(action_bounds[1]))
+    self.cost = cost
 
   # -- Brax API -------------------------------------------------------------
   @property
@@ -227,7 +239,10 @@ class DamageWrapper(Wrapper):
       ds = physics.begin_step(info["damage_state"])
       nstate = self.env.step(inner, action)
       ds = self._fallback_damage(nstate, ds)
-    cost = jnp.sum(ds.step_damage.total())
+    if self.cost == "damage":
+      cost = jnp.sum(ds.step_damage.total())
+    else:  # the health actually lost: bounded, unlike the damage that caused it
+      cost = jnp.sum(jnp.maximum(info["damage_state"].link_health - ds.link_health, 0.0))
     d = nstate.pipeline_state
     ok = (_all_finite(d.qpos) & _all_finite(d.qvel) & _all_finite(nstate.obs) & jnp.isfinite(nstate.reward)
           & jnp.isfinite(cost) & _all_finite(ds.link_health))

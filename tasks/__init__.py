@@ -85,6 +85,7 @@ _WRAPPER_OPTIONS = {
     "health_in_obs": ("health_in_obs", False),
     "params_fn": ("params_fn", None),
     "safe_threshold": ("safe_threshold", 95.0),
+    "cost": ("cost", "damage"),
 }
 
 STYLES = ("safe", "unsafe")

@@ -60,6 +60,42 @@ def test_termination_when_destroyed():
   assert float(s.info["entity_health"][0]) == 0.0 and float(s.done) == 1.0
 
 
+def test_health_lost_cost_is_the_health_the_links_lost():
+  """cost="health_lost": the same physics and health as the default, but each step costs what the links
+  lost (≤ 100 per link over the episode), where the models' damage of a plate dropped from 0.5 m is more."""
+  def run(cost):
+    env = md.DamageWrapper(DropEnv(min_height=0.5, max_height=0.6), weight=2.0, cost=cost)
+
+    def body(s, _):
+      n = env.step(s, jnp.zeros((0,)))
+      return n, (n.info["cost"], n.info["link_health"], n.reward, n.info["task_reward"])
+
+    s0 = env.reset(jax.random.PRNGKey(0))
+    _, out = jax.jit(lambda s: jax.lax.scan(body, s, None, length=30))(s0)
+    return np.asarray(s0.info["link_health"]), [np.asarray(x) for x in out]
+
+  h0, (damage, health, _, _) = run("damage")
+  h0_lost, (lost, health_lost, reward, task) = run("health_lost")
+  np.testing.assert_array_equal(health, health_lost)  # the option changes the cost only
+  before = np.concatenate([h0_lost[None], health_lost[:-1]])
+  np.testing.assert_allclose(lost, np.maximum(before - health_lost, 0.0).sum(-1), rtol=1e-6, atol=1e-6)
+  assert lost.sum() == pytest.approx((100.0 - health_lost[-1]).sum(), rel=1e-5) and lost.sum() <= 100.0 * h0.size
+  assert health_lost[-1].min() == 0.0 and lost.sum() == pytest.approx(100.0)  # one plate destroyed, the mug intact
+  assert damage.max() > 100.0 and damage.sum() > 1.5 * lost.sum()  # the impact step alone costs more than it can take
+  np.testing.assert_allclose(reward, task - 2.0 * lost, rtol=1e-5, atol=1e-5)
+
+
+def test_cost_signal_is_a_task_setting_and_bad_values_are_refused():
+  import tasks
+  assert tasks.default_config("place_plate")["cost"] == "damage"
+  assert tasks.make("place_plate", cost="health_lost").cost == "health_lost"
+  for bad in ("health", "", None, 1):
+    with pytest.raises(ValueError, match="^cost: must be one of damage, health_lost"):
+      md.DamageWrapper(DropEnv(), cost=bad)
+    with pytest.raises(ValueError, match="^cost:"):
+      tasks.make("place_plate", cost=bad)
+
+
 class ForeignDrop(Env):
   """A Brax env that knows nothing about damage: plain mjx.step in a hidden loop."""
 
