@@ -246,18 +246,25 @@ def test_bad_init_from_is_refused_naming_it(argv, says):
     R.parse_args((["--task", "pick_egg"] if "--task" not in argv else []) + argv)
 
 
-def test_init_from_hands_brax_our_actor_and_a_fresh_value_function(monkeypatch):
-  """brax's ppo.train gets that seed's normaliser and policy weights (restore_params), not its value net."""
-  got = {}
+class _Stop(Exception):
+  pass
 
-  class Stop(Exception):
-    pass
+
+def _capture_train(monkeypatch):
+  """brax's ppo.train replaced by one that records its keywords in ``got`` and raises ``Stop``."""
+  got = {}
 
   def fake_train(**kw):
     got.update(kw)
-    raise Stop
+    raise _Stop
 
   monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  return got, _Stop
+
+
+def test_init_from_hands_brax_our_actor_and_a_fresh_value_function(monkeypatch):
+  """brax's ppo.train gets that seed's normaliser and policy weights (restore_params), not its value net."""
+  got, Stop = _capture_train(monkeypatch)
   a = R.parse_args(["--task", "pick_egg", "--init-from", EGG, "--init-seed", "4"])
   with pytest.raises(Stop):
     R.train_one("pick_egg", 2.0, 0, dict(R.PLAYGROUND_PANDA_PICK_CUBE), None, a.settings, init=a.init)
@@ -383,16 +390,7 @@ def test_bad_max_grad_norm_is_refused_naming_it(value):
 def test_max_grad_norm_reaches_brax_its_export_and_the_row_label(monkeypatch, tmp_path):
   """--max-grad-norm 1: brax's ppo.train clips at 1 (stock: None), the exported config records it, and the
   row says so; a clipped run cannot be continued as an unclipped one."""
-  got = {}
-
-  class Stop(Exception):
-    pass
-
-  def fake_train(**kw):
-    got.update(kw)
-    raise Stop
-
-  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  got, Stop = _capture_train(monkeypatch)
   a = R.parse_args(["--task", "pick_egg"])
   for clip in (None, 1.0):
     cfg = dict(R.PLAYGROUND_PANDA_PICK_CUBE, **({} if clip is None else {"max_grad_norm": clip}))
