@@ -109,6 +109,10 @@ PLAYGROUND_PANDA_PICK_CUBE = {
 }
 POLICY_LAYERS, VALUE_LAYERS = (32,) * 4, (256,) * 5
 EVAL_SEED = 12345
+# brax's training metrics kept in each curve point (the names our trainer's history uses for the same)
+TRAINING_LOGGED = {"v_loss": "training/v_loss", "policy_loss": "training/policy_loss",
+                   "entropy_loss": "training/entropy_loss", "kl_mean": "training/kl_mean",
+                   "policy_dist_mean_std": "training/policy_dist_mean_std"}
 CURVE_SEED = 54321  # the per-evaluation scoring's episodes: not the final evaluation's
 
 
@@ -223,9 +227,12 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
   def progress(step, metrics):
     curve.append({"env_steps": before_steps + int(step), "wall_s": round(before_s + clock(), 1),
                   "eval_episode_reward": float(metrics.get("eval/episode_reward", np.nan)),
-                  "eval_success": float(metrics.get("eval/episode_success", np.nan))})
+                  "eval_success": float(metrics.get("eval/episode_success", np.nan)),
+                  # brax's losses of the last training epoch (absent at step 0): what a failing run shows first
+                  **{name: float(metrics[key]) for name, key in TRAINING_LOGGED.items() if key in metrics}})
+    loss = f", value loss {curve[-1]['v_loss']:.3g}" if "v_loss" in curve[-1] else ""
     print(f"  w={weight:g} seed={seed}: {curve[-1]['env_steps']} env-steps, {curve[-1]['wall_s']} s, "
-          f"eval reward {curve[-1]['eval_episode_reward']:.2f}", flush=True)
+          f"eval reward {curve[-1]['eval_episode_reward']:.2f}{loss}", flush=True)
 
   def keep_params(step, make_policy, params):
     last.update(step=before_steps + int(step), make_policy=make_policy, params=params)

@@ -297,6 +297,29 @@ def _brax_final(monkeypatch, params, step=123):
   monkeypatch.setattr(R, "evaluate", lambda *a, **k: {"metrics": metrics})
 
 
+def test_curve_keeps_brax_training_losses(monkeypatch):
+  """Each curve point keeps brax's last-epoch losses (the value loss first of all), where brax reports them."""
+  a = R.parse_args(["--task", "pick_egg", "--init-from", EGG, "--init-seed", "4"])
+  env = R.tasks.make("pick_egg", **a.settings)
+  params = load_policy(EGG, env, seed=4).params
+
+  def fake_train(progress_fn, policy_params_fn, **kw):
+    progress_fn(0, {"eval/episode_reward": 1.0})
+    progress_fn(50, {"eval/episode_reward": 2.0, "training/v_loss": 1.4e15, "training/kl_mean": 0.02,
+                     "training/policy_dist_mean_std": 0.8, "training/sps": 1e5})
+    policy_params_fn(50, lambda *a, **k: None, params)
+
+  monkeypatch.setattr(R.brax_ppo, "train", fake_train)
+  monkeypatch.setattr(R, "evaluate", lambda *a, **k: {"metrics": {"completion": 0.0, "safe_completion": 0.0,
+                                                                  "avg_health": 100.0, "cost_mean": 0.0, "episodes": 8}})
+  row = R.train_one("pick_egg", 2.0, 0, dict(R.PLAYGROUND_PANDA_PICK_CUBE, eval_episodes=8), None, a.settings,
+                    init=a.init)
+  first, last = row["curve"]
+  assert "v_loss" not in first
+  assert last["v_loss"] == 1.4e15 and last["kl_mean"] == 0.02 and last["policy_dist_mean_std"] == 0.8
+  assert "sps" not in last and "policy_loss" not in last
+
+
 def test_export_policy_writes_brax_weights_that_every_reader_of_ours_takes(monkeypatch, tmp_path):
   """The exported file is a policy of our format: load_policy gives back exactly brax's weights, and it can
   start either trainer (init_source, check_init) with its run's seed."""
