@@ -109,11 +109,11 @@ PLAYGROUND_PANDA_PICK_CUBE = {
 }
 POLICY_LAYERS, VALUE_LAYERS = (32,) * 4, (256,) * 5
 EVAL_SEED = 12345
+CURVE_SEED = 54321  # the per-evaluation scoring's episodes: not the final evaluation's
 # brax's training metrics kept in each curve point (the names our trainer's history uses for the same)
 TRAINING_LOGGED = {"v_loss": "training/v_loss", "policy_loss": "training/policy_loss",
                    "entropy_loss": "training/entropy_loss", "kl_mean": "training/kl_mean",
                    "policy_dist_mean_std": "training/policy_dist_mean_std"}
-CURVE_SEED = 54321  # the per-evaluation scoring's episodes: not the final evaluation's
 
 
 class _Budget(Exception):
@@ -336,7 +336,7 @@ def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
 
 
 RECIPE_KEYS = ("num_envs", "batch_size", "num_minibatches", "num_updates_per_batch", "unroll_length", "learning_rate",
-               "entropy_cost", "discounting", "reward_scaling")
+               "entropy_cost", "discounting", "reward_scaling", "max_grad_norm")  # max_grad_norm: None unless given
 
 
 def check_continue(path: str, task: str, settings: dict, eval_settings: dict | None, weights, seeds, cfg: dict,
@@ -361,11 +361,8 @@ def check_continue(path: str, task: str, settings: dict, eval_settings: dict | N
     if theirs != here:
       raise ValueError(f"continue_from: {path} was trained with {field} {theirs!r}; this call has {here!r}")
   for k in RECIPE_KEYS:
-    if ours.get(k) != cfg[k]:
-      raise ValueError(f"continue_from: {path} was trained with {k} = {ours.get(k)!r}; this call has {cfg[k]!r}")
-  if ours.get("max_grad_norm") != cfg.get("max_grad_norm"):
-    raise ValueError(f"continue_from: {path} was trained with max_grad_norm = {ours.get('max_grad_norm')!r}; "
-                     f"this call has {cfg.get('max_grad_norm')!r}")
+    if ours.get(k) != cfg.get(k):
+      raise ValueError(f"continue_from: {path} was trained with {k} = {ours.get(k)!r}; this call has {cfg.get(k)!r}")
   std = None if ours.get("init_log_std") is None else list(ours["init_log_std"])
   if std != (None if cfg.get("init_log_std") is None else list(cfg["init_log_std"])):
     raise ValueError(f"continue_from: {path} was trained with init_log_std {std}; this call has {cfg.get('init_log_std')}")

@@ -134,14 +134,18 @@ def _budget(row: dict) -> str:
 def _brax_changes(recipe: dict) -> str:
   """Where a brax run left the Playground recipe beyond the std: brax's envs reset between epochs (10 per
   evaluation) and its gradients unclipped, so runs with fixed starts or a clip are other runs."""
-  out = []
-  if recipe.get("num_resets_per_eval", 10) == 0:
+  out, resets = [], recipe.get("num_resets_per_eval", 10)
+  if resets == 0:
     out.append("fixed starts (no resets between epochs)")
-  elif recipe.get("num_resets_per_eval", 10) != 10:
-    out.append(f"{recipe['num_resets_per_eval']} resets per evaluation")
+  elif resets != 10:
+    out.append(f"{resets} resets per evaluation")
   if recipe.get("max_grad_norm") is not None:
-    out.append(f"grad-norm clip {recipe['max_grad_norm']:g}")
+    out.append(_clip(recipe["max_grad_norm"]))
   return ", ".join(out)
+
+
+def _clip(max_grad_norm: float | None) -> str:
+  return "no gradient clipping" if max_grad_norm is None else f"grad-norm clip {max_grad_norm:g}"
 
 
 def _scores(by_action: dict | None, head: dict, head_action: str, action: str) -> dict | None:
@@ -187,8 +191,7 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
         "lr annealed" if kw.get("anneal_learning_rate") else "",
         "entropy annealed" if kw.get("anneal_entropy") else "",
         f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "",
-        ("no gradient clipping" if kw["max_grad_norm"] is None else f"grad-norm clip {kw['max_grad_norm']:g}")
-        if "max_grad_norm" in kw else "")
+        _clip(kw["max_grad_norm"]) if "max_grad_norm" in kw else "")
         if x)
     head = (r.get("eval_actions") or ["mode"])[0]
     for p in r["per_seed"]:
