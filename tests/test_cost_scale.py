@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 from conftest import load_benchmark
 
+from apps import resolve as R
+
 C = load_benchmark("cost_scale")
 
 
@@ -32,7 +34,6 @@ def test_bad_input_is_refused_before_anything_compiles(argv, says):
 
 
 def test_step_scales_rolls_each_episode_to_its_first_done():
-  from apps import resolve as R
   env = R.make_task("drop")
   T = R.episode_length_of(env, "drop")
   s = C.step_scales(env, R.make_policy("zero", env), T, episodes=2, seed=0)

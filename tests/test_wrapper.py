@@ -10,6 +10,7 @@ from brax.envs.wrappers import training as bw
 from mujoco import mjx
 
 import mjx_damage as md
+import tasks
 from mjx_damage import native, physics
 from mjx_damage.backends import native as native_backend
 from tasks.drop import DROP_CONFIG, DropEnv, load_scene
@@ -86,7 +87,6 @@ def test_health_lost_cost_is_the_health_the_links_lost():
 
 
 def test_cost_signal_is_a_task_setting_and_bad_values_are_refused():
-  import tasks
   assert tasks.default_config("place_plate")["cost"] == "damage"
   assert tasks.make("place_plate", cost="health_lost").cost == "health_lost"
   for bad in ("health", "", None, 1):
