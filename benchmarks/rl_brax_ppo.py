@@ -83,7 +83,9 @@ sys.path.insert(0, ROOT)
 
 import mjx_damage  # noqa: E402,F401  (jax compat shim for brax, XLA:CPU flags, compile cache)
 import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from brax.training import types  # noqa: E402
 from brax.training.agents.ppo import networks as ppo_networks  # noqa: E402
 from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
@@ -126,9 +128,10 @@ def device_slug(kind: str | None = None) -> str:
   return re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_") or jax.default_backend()
 
 
-def network_factory(init_log_std: tuple[float, float] | None):
+def network_factory(init_log_std: tuple[float, float] | None, obs_clip: float | None = None):
   """The recipe's ``make_ppo_networks``; with ``init_log_std`` (arm, gripper = last action dim) its
-  policy starts at that per-dimension std (pre-tanh) in every state.
+  policy starts at that per-dimension std (pre-tanh) in every state; with ``obs_clip`` both networks see
+  the normalised observation clipped to ±``obs_clip`` (``--obs-clip``; our trainer's ``obs_clip``).
 
   Brax's tanh-normal policy has no std parameter (``make_ppo_networks`` ignores its noise-std
   arguments for it): the scale is ``softplus(last layer) + 0.001``. The same initialisation as our
@@ -137,11 +140,16 @@ def network_factory(init_log_std: tuple[float, float] | None):
   """
   base = functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=POLICY_LAYERS,
                            value_hidden_layer_sizes=VALUE_LAYERS)
-  if init_log_std is None:
+  if init_log_std is None and obs_clip is None:
     return base
 
   def make(observation_size, action_size, **kw):
+    if obs_clip is not None:  # brax passes its normaliser here (ppo.train's normalize_observations)
+      pre = kw.get("preprocess_observations_fn", types.identity_observation_preprocessor)
+      kw["preprocess_observations_fn"] = lambda obs, stats: jnp.clip(pre(obs, stats), -obs_clip, obs_clip)
     nets = base(observation_size, action_size, **kw)
+    if init_log_std is None:
+      return nets
     cfg = PPOConfig(init_log_std=tuple(init_log_std))
     init = functools.partial(init_policy, nets, cfg, action_size)
     return nets.replace(policy_network=dataclasses.replace(nets.policy_network, init=init))
@@ -170,6 +178,7 @@ def export_policy(path: str, params, env, task: str, settings: dict, weight: flo
       unroll_length=cfg["unroll_length"], learning_rate=cfg["learning_rate"], entropy_cost=cfg["entropy_cost"],
       discounting=cfg["discounting"], reward_scaling=cfg["reward_scaling"],
       max_grad_norm=cfg.get("max_grad_norm"),  # brax's default None (the recipe's) unless --max-grad-norm
+      obs_clip=cfg.get("obs_clip"),  # None (brax's unbounded normaliser) unless --obs-clip
       init_log_std=None if cfg.get("init_log_std") is None else tuple(cfg["init_log_std"]))
   meta = {"task": task, "task_kwargs": settings, "kind": "brax_ppo", "config": ours.to_json(),
           "obs_size": obs_size, "action_size": int(env.action_size), "env_steps": int(env_steps),
@@ -264,7 +273,7 @@ def train_one(task: str, weight: float, seed: int, cfg: dict, budget_s: float | 
         batch_size=cfg["batch_size"], num_minibatches=cfg["num_minibatches"],
         num_updates_per_batch=cfg["num_updates_per_batch"], num_resets_per_eval=cfg["num_resets_per_eval"],
         normalize_observations=cfg["normalize_observations"], reward_scaling=cfg["reward_scaling"],
-        network_factory=network_factory(cfg.get("init_log_std")), max_grad_norm=cfg.get("max_grad_norm"),
+        network_factory=network_factory(cfg.get("init_log_std"), cfg.get("obs_clip")), max_grad_norm=cfg.get("max_grad_norm"),
         num_evals=cfg["num_evals"], num_eval_envs=cfg["num_eval_envs"], seed=seed,
         progress_fn=progress, policy_params_fn=keep_params, eval_env=eval_env, **restore)
   except _Budget:
@@ -312,9 +321,10 @@ def _std_label(row: dict) -> str:
   if row.get("init_from"):
     return f", actor from {row['init_from']} seed {row['init_seed']}"
   recipe = row.get("recipe", {})
-  std, clip = recipe.get("init_log_std"), recipe.get("max_grad_norm")
+  std, clip, obs = recipe.get("init_log_std"), recipe.get("max_grad_norm"), recipe.get("obs_clip")
   return ("" if std is None else f", initial log-std {std[0]:g}/{std[1]:g}") + (
-      "" if clip is None else f", gradient norm clipped at {clip:g}")
+      "" if clip is None else f", gradient norm clipped at {clip:g}") + (
+      "" if obs is None else f", observations clipped at ±{obs:g}")
 
 
 def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
@@ -336,7 +346,7 @@ def check_init(path: str, seed: int | None, task: str) -> tuple[str, int]:
 
 
 RECIPE_KEYS = ("num_envs", "batch_size", "num_minibatches", "num_updates_per_batch", "unroll_length", "learning_rate",
-               "entropy_cost", "discounting", "reward_scaling", "max_grad_norm")  # max_grad_norm: None unless given
+               "entropy_cost", "discounting", "reward_scaling", "max_grad_norm", "obs_clip")  # the last two: None unless given
 
 
 def check_continue(path: str, task: str, settings: dict, eval_settings: dict | None, weights, seeds, cfg: dict,
@@ -499,6 +509,8 @@ def parse_args(argv=None):
   p.add_argument("--num-resets-per-eval", type=int, default=pc["num_resets_per_eval"])
   p.add_argument("--max-grad-norm", type=float, default=None, metavar="X",
                  help="clip the gradient's global norm at X (default: none, the recipe's; ours clips at 1)")
+  p.add_argument("--obs-clip", type=float, default=None, metavar="X",
+                 help="clip the normalised observations at ±X (default: none, brax's normaliser, unbounded)")
   p.add_argument("--eval-episodes", type=int, default=1024)
   p.add_argument("--curve-episodes", type=int, default=256,
                  help="episodes scoring the policy at each of brax's evaluations (completion, safe completion, "
@@ -570,6 +582,8 @@ def parse_args(argv=None):
     raise ValueError(f"budget_seconds: must be > 0, got {a.budget_seconds}")
   if a.max_grad_norm is not None and not (np.isfinite(a.max_grad_norm) and a.max_grad_norm > 0):
     raise ValueError(f"max_grad_norm: must be a finite number > 0, got {a.max_grad_norm}")
+  if a.obs_clip is not None and not (np.isfinite(a.obs_clip) and a.obs_clip > 0):
+    raise ValueError(f"obs_clip: must be a finite number > 0, got {a.obs_clip}")
   if a.init_log_std is not None:
     a.init_log_std = tuple(_csv(a.init_log_std, float, "init_log_std"))
     if len(a.init_log_std) != 2 or not all(-5.0 <= v <= 2.0 for v in a.init_log_std):  # also refuses NaN
@@ -642,7 +656,8 @@ def main(argv=None) -> int:
              batch_size=a.batch_size, num_minibatches=a.num_minibatches, unroll_length=a.unroll_length,
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
              eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}),
-             **({} if a.max_grad_norm is None else {"max_grad_norm": a.max_grad_norm}))
+             **({} if a.max_grad_norm is None else {"max_grad_norm": a.max_grad_norm}),
+             **({} if a.obs_clip is None else {"obs_clip": a.obs_clip}))
   stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
   cont = None if a.continue_from is None else check_continue(
       a.continue_from, a.task, a.settings, a.eval_settings, a.weights, a.seed_list, cfg, a.init)

@@ -149,6 +149,8 @@ def method_spec(name: str, args) -> dict:
     clip = None if args.max_grad_norm == "none" else args.max_grad_norm
     spec = dict(spec, label=spec["label"] + (", no gradient clipping" if clip is None else f", grad-norm clip {clip:g}"),
                 max_grad_norm=clip)
+  if args.obs_clip is not None:
+    spec = dict(spec, label=spec["label"] + f", observations clipped at ±{args.obs_clip:g}", obs_clip=args.obs_clip)
   if args.redraw_starts_steps:
     spec = dict(spec, label=spec["label"] + f", starts redrawn every {args.redraw_starts_steps:.3g} steps",
                 redraw_starts_steps=int(args.redraw_starts_steps))
@@ -218,6 +220,8 @@ def parse(argv):
   p.add_argument("--max-grad-norm", default=None, metavar="X|none",
                  help="every method: per-network gradient-norm clip, or none (brax's ppo.train default, which "
                       "Playground's PandaPickCube recipe keeps) (default: the preset's)")
+  p.add_argument("--obs-clip", type=float, default=None, metavar="X",
+                 help="every method: bound on |normalised observation| (default: none, brax's normaliser unbounded)")
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")
@@ -345,6 +349,8 @@ def parse(argv):
       p.error(f"--max-grad-norm: a number > 0 or none, got {text!r}")
     if args.max_grad_norm != "none" and not (math.isfinite(args.max_grad_norm) and args.max_grad_norm > 0):
       p.error(f"--max-grad-norm: a number > 0 or none, got {text!r}")
+  if args.obs_clip is not None and not (math.isfinite(args.obs_clip) and args.obs_clip > 0):
+    p.error(f"--obs-clip: a finite number > 0, got {args.obs_clip}")
   if not (args.redraw_starts_steps >= 0 and float(args.redraw_starts_steps).is_integer()):
     p.error(f"--redraw-starts-steps: a whole number of env steps >= 0, got {args.redraw_starts_steps}")
   for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps)):

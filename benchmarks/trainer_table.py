@@ -133,7 +133,7 @@ def _budget(row: dict) -> str:
 
 def _brax_changes(recipe: dict) -> str:
   """Where a brax run left the Playground recipe beyond the std: brax's envs reset between epochs (10 per
-  evaluation) and its gradients unclipped, so runs with fixed starts or a clip are other runs."""
+  evaluation), its gradients and observations unclipped, so runs with fixed starts or a clip are other runs."""
   out, resets = [], recipe.get("num_resets_per_eval", 10)
   if resets == 0:
     out.append("fixed starts (no resets between epochs)")
@@ -141,11 +141,17 @@ def _brax_changes(recipe: dict) -> str:
     out.append(f"{resets} resets per evaluation")
   if recipe.get("max_grad_norm") is not None:
     out.append(_clip(recipe["max_grad_norm"]))
+  if recipe.get("obs_clip") is not None:
+    out.append(_obs_clip(recipe["obs_clip"]))
   return ", ".join(out)
 
 
 def _clip(max_grad_norm: float | None) -> str:
   return "no gradient clipping" if max_grad_norm is None else f"grad-norm clip {max_grad_norm:g}"
+
+
+def _obs_clip(bound: float) -> str:
+  return f"observations clipped at ±{bound:g}"
 
 
 def _scores(by_action: dict | None, head: dict, head_action: str, action: str) -> dict | None:
@@ -191,7 +197,8 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
         "lr annealed" if kw.get("anneal_learning_rate") else "",
         "entropy annealed" if kw.get("anneal_entropy") else "",
         f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "",
-        _clip(kw["max_grad_norm"]) if "max_grad_norm" in kw else "")
+        _clip(kw["max_grad_norm"]) if "max_grad_norm" in kw else "",
+        _obs_clip(kw["obs_clip"]) if kw.get("obs_clip") is not None else "")
         if x)
     head = (r.get("eval_actions") or ["mode"])[0]
     for p in r["per_seed"]:

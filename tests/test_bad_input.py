@@ -149,6 +149,7 @@ CLI_CASES = [
     (["train", "--task", "place_plate", "--num-envs", "1.5"], "--num-envs"),
     (["train", "--task", "place_plate", "--timesteps", "-10"], "num_timesteps"),
     (["train", "--task", "place_plate", "--lr", "nan"], "learning_rate"),
+    (["train", "--task", "place_plate", "--obs-clip", "-1"], "obs_clip"),
     (["train", "--task", "place_plate", "--gamma", "1.5"], "discounting"),
     (["train", "--task", "place_plate", "--activation", "sigmoidal"], "activation"),
     (["train", "--task", "place_plate", "--multiplier", "pi", "--budget", "2"], "multiplier"),

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from brax.training.acme import running_statistics
 from conftest import load_benchmark
 
 from train.policy import load_policy
@@ -429,6 +430,41 @@ def test_max_grad_norm_reaches_brax_its_export_and_the_row_label(monkeypatch, tm
   assert R.ckpt.read_meta(path)["config"]["max_grad_norm"] is None
   R.check_continue(clipped, "pick_egg", settings, None, [2.0], [7], dict(cfg, max_grad_norm=1.0), None)
   with pytest.raises(ValueError, match="^continue_from: .*max_grad_norm"):
+    R.check_continue(clipped, "pick_egg", settings, None, [2.0], [7], cfg, None)
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf"])
+def test_bad_obs_clip_is_refused_naming_it(value):
+  with pytest.raises(ValueError, match="obs_clip"):
+    R.parse_args([f"--obs-clip={value}"])
+
+
+def test_obs_clip_bounds_what_both_networks_see_and_is_recorded(monkeypatch, tmp_path):
+  """--obs-clip 5: brax's networks get the normalised observation clipped at ±5 (stock: unbounded), the
+  exported config records it so our loader builds the same networks, and a run cannot be continued without it."""
+  stats = running_statistics.init_state(jnp.zeros((3,), jnp.float32))  # mean 0, std 1: normalised = raw
+  near, far = jnp.array([[5.0, -5.0, 1.0]]), jnp.array([[5e6, -5e6, 1.0]])
+  for clip, same in ((5.0, True), (None, False)):
+    nets = R.network_factory((-0.5, -1.5), clip)(3, 2, preprocess_observations_fn=running_statistics.normalize)
+    pol = nets.policy_network.init(jax.random.PRNGKey(0))
+    val = nets.value_network.init(jax.random.PRNGKey(1))
+    for net, w in ((nets.policy_network, pol), (nets.value_network, val)):
+      a, b = net.apply(stats, w, near), net.apply(stats, w, far)
+      assert bool(jnp.allclose(a, b)) is same
+  got, Stop = _capture_train(monkeypatch)
+  a = R.parse_args(["--task", "pick_egg", "--obs-clip", "5"])
+  with pytest.raises(Stop):
+    R.train_one("pick_egg", 2.0, 0, dict(R.PLAYGROUND_PANDA_PICK_CUBE, obs_clip=5.0), None, a.settings)
+  nets = got["network_factory"](3, 2, preprocess_observations_fn=running_statistics.normalize)
+  w = nets.value_network.init(jax.random.PRNGKey(1))
+  assert bool(jnp.allclose(nets.value_network.apply(stats, w, near), nets.value_network.apply(stats, w, far)))
+  assert R._std_label({"recipe": {"obs_clip": 5.0}}) == ", observations clipped at ±5"
+  path, env, params, cfg, settings = _exported_with_value(monkeypatch, tmp_path)
+  clipped = str(tmp_path / "obs_clipped.npz")
+  R.train_one("pick_egg", 2.0, 7, dict(cfg, obs_clip=5.0), None, settings, export=clipped)
+  assert R.ckpt.read_meta(clipped)["config"]["obs_clip"] == 5.0
+  assert load_policy(clipped, env).meta["config"]["obs_clip"] == 5.0
+  with pytest.raises(ValueError, match="^continue_from: .*obs_clip"):
     R.check_continue(clipped, "pick_egg", settings, None, [2.0], [7], cfg, None)
 
 

@@ -41,6 +41,9 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--max-grad-norm", "off"], "--max-grad-norm"),
     (["--max-grad-norm", "0"], "--max-grad-norm"),
     (["--max-grad-norm", "nan"], "--max-grad-norm"),
+    (["--obs-clip", "0"], "--obs-clip"),
+    (["--obs-clip", "-5"], "--obs-clip"),
+    (["--obs-clip", "inf"], "--obs-clip"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
@@ -242,6 +245,14 @@ def test_max_grad_norm_reaches_every_method_none_meaning_no_clipping():
   spec = rl_multiseed.method_spec("penalty", rl_multiseed.parse(["--max-grad-norm", "0.5"]))
   assert spec["max_grad_norm"] == 0.5 and "grad-norm clip 0.5" in spec["label"]
   assert "max_grad_norm" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
+
+
+def test_obs_clip_reaches_every_method_and_its_label():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty", "--obs-clip", "10"])
+  for m in ("task_only", "penalty"):
+    spec = rl_multiseed.method_spec(m, a)
+    assert spec["obs_clip"] == 10.0 and "observations clipped at ±10" in spec["label"]
+  assert "obs_clip" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
 
 
 def test_target_kl_rule_reaches_the_paper_methods_only():

@@ -16,10 +16,12 @@ import numpy as np
 import pytest
 
 from brax.envs.base import Wrapper
+from brax.training.acme import running_statistics
 
 import mjx_damage as md
 import train
 from train import multipliers as M
+from train import networks as N
 from train import ppo
 from train.experiments.pusher import PusherEnv
 
@@ -251,6 +253,23 @@ def test_entropy_anneal_run(env):
   assert train.PPOConfig.from_json({}).anneal_entropy is False  # runs from before: a constant coefficient
 
 
+def test_obs_clip_bounds_the_normalised_input_of_both_networks():
+  """obs_clip: a coordinate the normaliser saw still (std at its 1e-6 floor) and that then moves reaches the
+  networks as at most ±obs_clip; unset (the default, and every run from before), unbounded as in brax."""
+  stats = running_statistics.update(running_statistics.init_state(jnp.zeros((2,), jnp.float32)),
+                                    jnp.array([[0.1, 0.0], [-0.1, 0.0]], jnp.float32))  # coordinate 1 still
+  moved = jnp.array([[0.0, 0.01]], jnp.float32)  # 1 cm: 10⁴ after normalising
+  assert float(jnp.abs(N.normalizer_fn(train.PPOConfig())(moved, stats)).max()) > 1e3
+  assert float(jnp.abs(N.normalizer_fn(train.PPOConfig(obs_clip=5.0))(moved, stats)).max()) == 5.0
+  cfg = train.PPOConfig(obs_clip=5.0, policy_hidden_sizes=(8,), value_hidden_sizes=(8,))
+  nets = N.make_networks(2, 2, cfg)
+  params = N.init_params(nets, cfg, 2, jax.random.PRNGKey(0))
+  at_bound, far = jnp.array([[0.0, 5e-6]]), jnp.array([[0.0, 1.0]])  # both ≥ 5 after normalising
+  for net, w in ((nets.policy_network, params.policy), (nets.value_network, params.value)):
+    assert bool(jnp.allclose(net.apply(stats, w, at_bound), net.apply(stats, w, far)))
+  assert train.PPOConfig.from_json({}).obs_clip is None
+
+
 @pytest.mark.parametrize("kwargs,name", [
     (dict(budget=-1.0), "budget"),
     (dict(damage_warmup_steps=-1, damage_weight=2.0), "damage_warmup_steps"),
@@ -260,6 +279,9 @@ def test_entropy_anneal_run(env):
     (dict(num_envs=16, num_minibatches=2, batch_size=12), "num_envs"),
     (dict(damage_weight=-2.0), "damage_weight"),
     (dict(learning_rate=0.0), "learning_rate"),
+    (dict(obs_clip=0.0), "obs_clip"),
+    (dict(obs_clip=float("nan")), "obs_clip"),
+    (dict(obs_clip=5.0, normalize_observations=False), "obs_clip"),
     (dict(policy_hidden_sizes=()), "policy_hidden_sizes"),
     (dict(multiplier="pd"), "multiplier"),
     (dict(seeds=(1, 1)), "seeds"),
@@ -386,7 +408,6 @@ def test_paper_preset_initial_log_std_per_dimension():
   """Brax's tanh-normal head has no std parameter: our init gives log-std −0.5 (arm) / −1.5 (gripper) in every state."""
   from brax.training.acme import running_statistics
 
-  from train import networks as N
   cfg = train.PPOConfig.preset("paper").validate()
   assert (cfg.policy_hidden_sizes, cfg.activation, cfg.num_updates_per_batch, cfg.num_minibatches,
           cfg.unroll_length, cfg.target_kl, cfg.entropy_cost, cfg.max_grad_norm) == ((512, 512), "tanh", 10, 8,
@@ -404,7 +425,6 @@ def test_parameter_std_is_the_same_in_every_state_and_learns(env, tmp_path):
   moved by training (its gradient reaches it), saved and loaded with the run; the MLP gives only the mean."""
   from brax.training.acme import running_statistics
 
-  from train import networks as N
   cfg = train.PPOConfig(policy_std="parameter", init_log_std=(-0.5, -1.5), policy_hidden_sizes=(16, 16)).validate()
   net = N.make_networks(6, 4, cfg)
   params = N.init_policy(net, cfg, 4, jax.random.PRNGKey(0))

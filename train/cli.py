@@ -132,6 +132,8 @@ CONFIG_FLAGS = (
     ("--reward-scaling", "reward_scaling", float, None),
     ("--max-grad-norm", "max_grad_norm", _float_or_none, "per-network gradient-norm clip; none: no clipping "
      "(brax's ppo.train default, which Playground's PandaPickCube recipe keeps)"),
+    ("--obs-clip", "obs_clip", _float_or_none, "bound on |normalised observation| (none: unbounded, brax's "
+     "default)"),
     ("--target-kl", "target_kl", float, "stop an iteration's epochs early once the update's KL is too large"),
     ("--policy-std", "policy_std", str, "state (brax: the std an output of the actor, per state) or parameter "
      "(one learned log-std per action dimension, as in SB3 and CleanRL)"),

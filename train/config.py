@@ -100,6 +100,11 @@ class PPOConfig:
   # every state (SB3's log_std_init, CleanRL's actor_logstd: what a table's "initial log-std" names).
   policy_std: str = "state"
   normalize_observations: bool = True
+  # Bound on |normalised observation| (brax's ``running_statistics.normalize(max_abs_value=)``; SB3's
+  # VecNormalize clip_obs). None: unbounded, brax's default. The normaliser floors a std at 1e-6, so a
+  # coordinate the first rollouts left still (a box resting on a shelf) is divided by ~1e-6 once a policy moves
+  # it: inputs of 10³–10⁷ on Shelve Item (benchmarks/obs_scale.py, docs/rl_task_design.md).
+  obs_clip: Optional[float] = None
   # False: the observation normaliser keeps the statistics the run started with. For fine-tuning a
   # pre-trained actor (train(init_from=...)): its weights were fitted to those statistics, and
   # re-estimating them from the new rollouts changes what the actor computes before it has learned
@@ -258,6 +263,9 @@ class PPOConfig:
     number("value_cost", lo=0)
     number("reward_scaling", lo=0, lo_open=True)
     number("max_grad_norm", lo=0, lo_open=True, allow_none=True)
+    number("obs_clip", lo=0, lo_open=True, allow_none=True)
+    if self.obs_clip is not None and not self.normalize_observations:
+      raise ValueError("obs_clip: bounds normalised observations; set normalize_observations too")
     number("target_kl", lo=0, lo_open=True, allow_none=True)
     if self.policy_std not in POLICY_STDS:
       raise ValueError(f"policy_std: one of {', '.join(POLICY_STDS)}, got {self.policy_std!r}")
@@ -315,7 +323,7 @@ class PPOConfig:
            "value_cost": 0.5, "budget_anneal_steps": 0,
            "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False,
            "target_kl_rule": "minibatch", "policy_std": "state", "anneal_entropy": False,
-           "redraw_starts_steps": 0}
+           "redraw_starts_steps": 0, "obs_clip": None}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

@@ -41,9 +41,18 @@ ACTIVATIONS: dict[str, Callable] = {
 MIN_STD = 0.001  # brax NormalTanhDistribution's floor on the scale
 
 
+def normalizer_fn(cfg: PPOConfig):
+  """``normalize(obs, statistics) -> obs'``: brax's running normaliser, bounded to ±``cfg.obs_clip`` when set."""
+  if not cfg.normalize_observations:
+    return types.identity_observation_preprocessor
+  if cfg.obs_clip is None:
+    return running_statistics.normalize
+  return functools.partial(running_statistics.normalize, max_abs_value=float(cfg.obs_clip))
+
+
 def make_networks(obs_size: int, action_size: int, cfg: PPOConfig) -> ppo_networks.PPONetworks:
   """Brax's PPO networks; with ``cfg.cost_critic`` the critic has a second output, V_c (train.constrained_loss)."""
-  normalize = running_statistics.normalize if cfg.normalize_observations else types.identity_observation_preprocessor
+  normalize = normalizer_fn(cfg)
   nets = ppo_networks.make_ppo_networks(
       obs_size,
       action_size,
