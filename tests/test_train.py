@@ -22,6 +22,7 @@ import mjx_damage as md
 import train
 from train import multipliers as M
 from train import networks as N
+from train import iteration
 from train import ppo
 from train.experiments.pusher import PusherEnv
 
@@ -75,6 +76,8 @@ def test_smoke_train_checkpoint_load_evaluate(smoke, env):
   for k in ("completion", "safe_completion", "avg_env_health", "episode_cost", "task_return", "episodes"):
     assert k in smoke.final_eval
   assert np.isfinite(smoke.throughput) and smoke.throughput > 0
+  # the networks' largest normalised input since the previous row: finite, and past the reset observation's 0
+  assert all(np.isfinite(r["obs_max_abs_z"]) and r["obs_max_abs_z"] > 0 for r in rows)
   assert smoke.train_state.iteration.shape == (2,)
 
   state = jax.jit(env.reset)(jax.random.PRNGKey(0))
@@ -268,6 +271,27 @@ def test_obs_clip_bounds_the_normalised_input_of_both_networks():
   for net, w in ((nets.policy_network, params.policy), (nets.value_network, params.value)):
     assert bool(jnp.allclose(net.apply(stats, w, at_bound), net.apply(stats, w, far)))
   assert train.PPOConfig.from_json({}).obs_clip is None
+
+
+def test_max_abs_z_is_the_networks_largest_input_before_any_clip():
+  """The training metric obs_max_abs_z: a coordinate the normaliser saw still (std at its 1e-6 floor), moved
+  1 cm at one step of one env, is 10⁴, the largest |input| of the whole [R·E, T, O] batch."""
+  stats = running_statistics.update(running_statistics.init_state(jnp.zeros((2,), jnp.float32)),
+                                    jnp.array([[0.1, 0.0], [-0.1, 0.0]], jnp.float32))
+  obs = jnp.zeros((3, 4, 2), jnp.float32).at[1, 2, 1].set(0.01)
+  assert float(iteration.max_abs_z(stats, obs)) == pytest.approx(1e4, rel=1e-3)
+  assert float(iteration.max_abs_z(stats, jnp.zeros((3, 4, 2), jnp.float32))) == 0.0
+
+
+def test_a_diverged_run_names_a_huge_normalised_input():
+  """TrainingDiverged names the networks' largest normalised input of a diverged seed when it is far past unit
+  scale (and points at --obs-clip); not when it is not, nor another seed's."""
+  m = {"loss/v_loss": np.array([np.nan, 1.0]), "obs_max_abs_z": np.array([2e6, 5e6]), "env_non_finite": np.zeros(2)}
+  msg = str(ppo._diverged(ppo.non_finite_losses(m, (3, 4)), m, (3, 4), 7, 896, None))
+  assert "input was 2e+06 for seed 3" in msg and "5e+06" not in msg and "--obs-clip" in msg
+  m["obs_max_abs_z"] = np.array([50.0, 5e6])
+  msg = str(ppo._diverged(ppo.non_finite_losses(m, (3, 4)), m, (3, 4), 7, 896, None))
+  assert "input was" not in msg and "seed 3: loss/v_loss" in msg
 
 
 @pytest.mark.parametrize("kwargs,name", [

@@ -111,6 +111,19 @@ def scheduled_weight(damage_weight, iteration, warmup, ramp):
   return damage_weight * frac
 
 
+def max_abs_z(normalizer, observation):
+  """The largest |normalised observation| in a batch (f32[]): what the networks' first layers receive before
+  any ``obs_clip``. A coordinate the normaliser's early statistics saw still gets a std near brax's 1e-6
+  floor, and once a policy moves it this reaches 10^3-10^7 and the value loss follows (docs/rl_task_design.md,
+  "Shelve Item: the gap between the trainers is the observation normaliser")."""
+  z = running_statistics.normalize(observation, normalizer)
+  return jnp.max(jnp.stack([jnp.max(jnp.abs(leaf)) for leaf in jax.tree.leaves(z)]))
+
+
+# update() metrics reported under their own names; the others are the loss's, reported as loss/<name>
+UNPREFIXED = ("sgd_steps", "obs_max_abs_z")
+
+
 def shape_reward(r_task, cost, damage_weight, lam):
   """Policy reward ``(r_task − (w + λ)·cost) / (1 + λ)``; any matching shapes (module docstring)."""
   return (r_task - (damage_weight + lam) * cost) / (1.0 + lam)
@@ -153,6 +166,9 @@ class Trainer:
 
   def _pmean(self, tree):
     return tree if self.axis_name is None else jax.lax.pmean(tree, self.axis_name)
+
+  def _pmax(self, tree):
+    return tree if self.axis_name is None else jax.lax.pmax(tree, self.axis_name)
 
   # -- init -----------------------------------------------------------------
   def init_state(self, seed) -> TrainState:
@@ -317,6 +333,8 @@ class Trainer:
         jax.random.split(self._local(k_sgd), self.cfg.num_updates_per_batch))
     metrics = {k: jnp.sum(v * taken) / jnp.maximum(jnp.sum(taken), 1.0) for k, v in metrics.items()}
     metrics["sgd_steps"] = jnp.sum(taken)
+    if self.cfg.normalize_observations:
+      metrics["obs_max_abs_z"] = self._pmax(max_abs_z(sgd_normalizer, data.observation))
     if self.cfg.critic_warmup_iterations:
       params, opt_state = self._hold_actor(ts, params, opt_state, ts.iteration < self.cfg.critic_warmup_iterations)
     return ts.replace(params=params, opt_state=opt_state, normalizer=normalizer, rng=key), metrics
@@ -361,7 +379,7 @@ class Trainer:
     ts = ts.replace(multiplier=mult, cost_estimate=cost_estimate, has_cost_estimate=has_estimate,
                     iteration=ts.iteration + 1)
     metrics = {f"ended_{k}": v for k, v in ended.items()}
-    metrics.update({("sgd_steps" if k == "sgd_steps" else f"loss/{k}"): v for k, v in loss_metrics.items()})
+    metrics.update({(k if k in UNPREFIXED else f"loss/{k}"): v for k, v in loss_metrics.items()})
     # share of this rollout's transitions whose observation, reward or cost is not finite: 0 unless the
     # physics blew up (names the env, not the learner, when train.ppo.TrainingDiverged stops a run)
     finite = jnp.isfinite(data.reward) & jnp.isfinite(cost)

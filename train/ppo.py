@@ -80,6 +80,12 @@ class TrainingDiverged(FloatingPointError):
   instead of carrying NaN parameters (whose actions the env reads as 0) to the end of the budget."""
 
 
+# obs_max_abs_z past this: inputs far outside the unit scale the networks were initialised for. Under the
+# first rollout's statistics the states of Shelve Item's unclipped learner reach 9e6; every learnt policy
+# measured, on each RL task, stays below 1.3e2 (benchmarks/obs_scale.py)
+Z_LARGE = 1e3
+
+
 def non_finite_losses(m: dict, seeds) -> dict:
   """``{seed: [metric, …]}`` of the seeds whose ``loss/*`` metrics (f32[S] each) are not all finite."""
   bad = {}
@@ -98,12 +104,18 @@ def _diverged(bad: dict, m: dict, seeds, iteration: int, env_steps: int, ckpt_pa
   if np.any(env_bad > 0):
     what += " (the env's own observations, rewards or costs were non-finite in " + ", ".join(
         f"{100 * f:.3g} % of seed {s}'s transitions" for s, f in zip(seeds, env_bad) if f > 0) + ")"
+  z = np.asarray(m.get("obs_max_abs_z", np.zeros(len(seeds))), np.float64)
+  if np.any(z[[list(seeds).index(b) for b in bad]] > Z_LARGE):
+    what += (" (the networks' largest normalised observation input was " + ", ".join(
+        f"{v:.3g} for seed {s}" for s, v in zip(seeds, z) if s in bad) + ": observations far outside the "
+        "normaliser's statistics; --obs-clip bounds what the networks see)")
   kept = (f"the checkpoint in {ckpt_path} is from before it" if ckpt_path and os.path.exists(ckpt_path)
           else "no checkpoint was written")
   return TrainingDiverged(
       f"training diverged at iteration {iteration} ({env_steps:,} env steps per seed): non-finite {what}; "
       f"{kept}. Usual causes: a non-finite observation or reward from the env (run benchmarks/soak.py on "
-      f"the task) or too large a learning rate.")
+      f"the task), observations normalised far past unit scale (metric obs_max_abs_z; --obs-clip) or too "
+      f"large a learning rate.")
 
 
 def _read_rows(out_dir: str) -> list:
@@ -355,6 +367,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
                desc=desc, dynamic_ncols=True)
 
   window = {k: np.zeros(S) for k in WINDOW_KEYS}  # per-seed training-episode sums since the last row
+  z_window = np.zeros(S)  # per-seed largest obs_max_abs_z since the last row (a spike between rows counts)
   stopped_early, final_evals, iteration, first_eval = False, [], start_iteration, True
   with _StopFlag() as stop:
     for iteration in range(start_iteration + 1, n_iter + 1):
@@ -370,6 +383,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
       t_host = time.perf_counter()
       for k in WINDOW_KEYS:
         window[k] += np.asarray(m[f"ended_{k}"], np.float64)
+      if "obs_max_abs_z" in m:
+        z_window = np.maximum(z_window, np.asarray(m["obs_max_abs_z"], np.float64))
       last = iteration == n_iter
       # One decision for all processes: one that stopped alone would leave the others in a collective.
       signalled, over_time = distributed.any_process(
@@ -398,10 +413,13 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
           for k in WINDOW_KEYS[1:]:
             row[f"train/episode_{k}"] = float(window[k][i]) / n if n else None
           row.update({k: float(v[i]) for k, v in m.items() if not k.startswith("ended_")})
+          if "obs_max_abs_z" in m:
+            row["obs_max_abs_z"] = float(z_window[i])
           row.update({f"eval/{k}": v for k, v in evs[i].items()})
           rows.append(row)
         _write_rows(writes, rows)
         window = {k: np.zeros(S) for k in WINDOW_KEYS}
+        z_window = np.zeros(S)
         final_evals = evs
       if ckpt_path and (last or (ckpt_int and iteration % ckpt_int == 0)):
         save(ts, iteration)
