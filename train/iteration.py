@@ -112,13 +112,12 @@ def scheduled_weight(damage_weight, iteration, warmup, ramp):
 
 
 def max_abs_z(normalizer, observation):
-  """The largest |normalised observation| in a batch (f32[]): what the networks' first layers receive before
-  any ``obs_clip``. A coordinate the normaliser's early statistics saw still gets a std near brax's 1e-6
+  """The largest |normalised observation| of ``observation`` f32[..., O] (f32[]): what the networks' first
+  layers receive before any ``obs_clip``. A coordinate the normaliser's early statistics saw still gets a std near brax's 1e-6
   floor, and once a policy moves it this grows far past unit scale (Shelve Item's unclipped run: 10^2-10^3 in
   its first iterations, then its value loss blew up; docs/rl_task_design.md, "Shelve Item: the gap between the
   trainers is the observation normaliser")."""
-  z = running_statistics.normalize(observation, normalizer)
-  return jnp.max(jnp.stack([jnp.max(jnp.abs(leaf)) for leaf in jax.tree.leaves(z)]))
+  return jnp.max(jnp.abs(running_statistics.normalize(observation, normalizer)))
 
 
 # update() metrics reported under their own names; the others are the loss's, reported as loss/<name>
