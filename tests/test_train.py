@@ -9,6 +9,7 @@ import json
 import sys
 import types
 import os
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -292,6 +293,29 @@ def test_a_diverged_run_names_a_huge_normalised_input():
   m["obs_max_abs_z"] = np.array([50.0, 5e6])
   msg = str(ppo._diverged(ppo.non_finite_losses(m, (3, 4)), m, (3, 4), 7, 896, None))
   assert "input was" not in msg and "seed 3: loss/v_loss" in msg
+
+
+def test_large_input_message_names_the_seeds_past_the_line_and_is_silent_when_clipped():
+  z = np.array([150.0, 20.0, 3e4])
+  msg = ppo.large_input_message(z, (0, 1, 2), None)
+  assert "150 (seed 0)" in msg and "3e+04 (seed 2)" in msg and "seed 1" not in msg and "--obs-clip" in msg
+  assert ppo.large_input_message(z, (0, 1, 2), 10.0) is None  # clipped: the networks never saw them
+  assert ppo.large_input_message(np.array([99.0, 100.0]), (0, 1), None) is None  # at the line: quiet
+
+
+def test_a_run_warns_once_when_its_normalised_inputs_get_large_unless_clipped(env, monkeypatch):
+  """The training loop warns (LargeInputWarning, once per run) when obs_max_abs_z passes Z_LARGE with
+  observations unclipped, and not with obs_clip set. Z_LARGE lowered to 0 so a tiny run crosses it."""
+  monkeypatch.setattr(ppo, "Z_LARGE", 0.0)
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=ITER, **TINY)
+  large = [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
+  assert len(large) == 1 and "seed 3" in str(large[0].message) and "--obs-clip" in str(large[0].message)
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=ITER, obs_clip=10.0, **TINY)
+  assert not [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
 
 
 @pytest.mark.parametrize("kwargs,name", [

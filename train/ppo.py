@@ -31,6 +31,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from typing import Callable, Optional
 
 import jax
@@ -84,6 +85,25 @@ class TrainingDiverged(FloatingPointError):
 # Item's unclipped run on CPU logged 56-660 around its value-loss blow-up (docs/rl_task_design.md); Place
 # Plate's inputs stay within 10 (benchmarks/obs_scale.py)
 Z_LARGE = 100.0
+
+
+class LargeInputWarning(UserWarning):
+  """The networks were fed normalised observations far past unit scale, with nothing clipping them."""
+
+
+def large_input_message(z, seeds, obs_clip: Optional[float]) -> Optional[str]:
+  """What to warn when a seed's largest normalised input ``z`` (f32[S], the metric ``obs_max_abs_z``) passed
+  :data:`Z_LARGE` while ``obs_clip`` is None; None otherwise. Such inputs need not blow anything up to
+  matter: on Pick Egg (≈ 10², the egg's height) our trainer, gradient-clipped, found the carry from task
+  reward on 2 of 6 seeds unclipped and on 3 of 3 with ``obs_clip=10`` (docs/rl_task_design.md)."""
+  z = np.asarray(z, np.float64)
+  if obs_clip is not None or not np.any(z > Z_LARGE):
+    return None
+  big = ", ".join(f"{v:.3g} (seed {s})" for s, v in zip(seeds, z) if v > Z_LARGE)
+  return (f"the networks' largest normalised observation input reached {big}, past {Z_LARGE:g}: a coordinate "
+          f"the normaliser's first rollouts saw nearly still is divided by a std near its 1e-6 floor. Inputs "
+          f"this large broke unclipped runs on Shelve Item and slowed Pick Egg's; obs_clip (--obs-clip 10) "
+          f"bounds them. Warned once per run; the metric obs_max_abs_z logs it every row.")
 
 
 def non_finite_losses(m: dict, seeds) -> dict:
@@ -368,6 +388,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
 
   window = {k: np.zeros(S) for k in WINDOW_KEYS}  # per-seed training-episode sums since the last row
   z_window = np.zeros(S)  # per-seed largest obs_max_abs_z since the last row (a spike between rows counts)
+  warned_z = not main or cfg.obs_clip is not None
   stopped_early, final_evals, iteration, first_eval = False, [], start_iteration, True
   with _StopFlag() as stop:
     for iteration in range(start_iteration + 1, n_iter + 1):
@@ -385,6 +406,9 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
         window[k] += np.asarray(m[f"ended_{k}"], np.float64)
       if "obs_max_abs_z" in m:
         z_window = np.maximum(z_window, np.asarray(m["obs_max_abs_z"], np.float64))
+        if not warned_z and (msg := large_input_message(z_window, cfg.seeds, cfg.obs_clip)):
+          warnings.warn(msg, LargeInputWarning, stacklevel=2)
+          warned_z = True
       last = iteration == n_iter
       # One decision for all processes: one that stopped alone would leave the others in a collective.
       signalled, over_time = distributed.any_process(
