@@ -309,12 +309,12 @@ def test_a_run_warns_once_when_its_normalised_inputs_get_large_unless_clipped(en
   monkeypatch.setattr(ppo, "Z_LARGE", 0.0)
   with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
-    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=ITER, **TINY)
+    train.train(env, seeds=SEEDS, num_timesteps=2 * ITER, eval_every=2 * ITER, **TINY)
   large = [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
   assert len(large) == 1 and "seed 3" in str(large[0].message) and "--obs-clip" in str(large[0].message)
   with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
-    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=ITER, obs_clip=10.0, **TINY)
+    train.train(env, seeds=SEEDS, num_timesteps=2 * ITER, eval_every=2 * ITER, obs_clip=10.0, **TINY)
   assert not [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
 
 
