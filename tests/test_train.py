@@ -296,17 +296,17 @@ def test_a_diverged_run_names_a_huge_normalised_input():
 
 
 def test_large_input_message_names_the_seeds_past_the_line_and_is_silent_when_clipped():
-  z = np.array([150.0, 20.0, 3e4])
+  z = np.array([15.0, 6.7, 3e4])  # 6.7: Place Plate's largest in training, where a clip at 10 is inert
   msg = ppo.large_input_message(z, (0, 1, 2), None)
-  assert "150 (seed 0)" in msg and "3e+04 (seed 2)" in msg and "seed 1" not in msg and "--obs-clip" in msg
+  assert "15 (seed 0)" in msg and "3e+04 (seed 2)" in msg and "seed 1" not in msg and "--obs-clip" in msg
   assert ppo.large_input_message(z, (0, 1, 2), 10.0) is None  # clipped: the networks never saw them
-  assert ppo.large_input_message(np.array([99.0, 100.0]), (0, 1), None) is None  # at the line: quiet
+  assert ppo.large_input_message(np.array([9.9, 10.0]), (0, 1), None) is None  # at the line: quiet
 
 
-def test_a_run_warns_once_when_its_normalised_inputs_get_large_unless_clipped(env, monkeypatch):
-  """The training loop warns (LargeInputWarning, once per run) when obs_max_abs_z passes Z_LARGE with
-  observations unclipped, and not with obs_clip set. Z_LARGE lowered to 0 so a tiny run crosses it."""
-  monkeypatch.setattr(ppo, "Z_LARGE", 0.0)
+def test_a_run_warns_once_when_its_normalised_inputs_pass_the_usual_clip_unless_clipped(env, monkeypatch):
+  """The training loop warns (LargeInputWarning, once per run) when obs_max_abs_z passes Z_WARN with
+  observations unclipped, and not with obs_clip set. Z_WARN lowered to 0 so a tiny run crosses it."""
+  monkeypatch.setattr(ppo, "Z_WARN", 0.0)
   with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     train.train(env, seeds=SEEDS, num_timesteps=2 * ITER, eval_every=2 * ITER, **TINY)
