@@ -396,7 +396,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
 
   window = {k: np.zeros(S) for k in WINDOW_KEYS}  # per-seed training-episode sums since the last row
   z_window = np.zeros(S)  # per-seed largest obs_max_abs_z since the last row (a spike between rows counts)
-  warned_z = not main or cfg.obs_clip is not None
+  warned_z = not main  # large_input_message decides the rest (nothing to warn with obs_clip set)
   stopped_early, final_evals, iteration, first_eval = False, [], start_iteration, True
   with _StopFlag() as stop:
     for iteration in range(start_iteration + 1, n_iter + 1):
