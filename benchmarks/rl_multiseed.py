@@ -119,14 +119,19 @@ def method_spec(name: str, args) -> dict:
       tune = f"λ0={args.lagrange_init:g}, " + (f"lr={args.lagrange_lr:g}" if spec["multiplier"] == "lagrangian"
                                                else "K=" + "/".join(f"{g:g}" for g in args.pid_gains))
       spec = dict(spec, label=spec["label"].replace(")", f"; {tune})", 1), **gains)
-  if name == "penalty" and (args.damage_warmup_steps or args.damage_ramp_steps):
-    if args.damage_warmup_steps:
-      sched = f"w=0 for {args.damage_warmup_steps:.3g} steps" + (
-          f", then linear to {w:g} over {args.damage_ramp_steps:.3g}" if args.damage_ramp_steps else f", then {w:g}")
+  gate = args.damage_warmup_completion
+  if name == "penalty" and (args.damage_warmup_steps or args.damage_ramp_steps or gate):
+    then = f", then linear to {w:g} over {args.damage_ramp_steps:.3g}" if args.damage_ramp_steps else f", then {w:g}"
+    if gate:
+      sched = f"w=0 until training completion ≥ {gate:.0%}" + (
+          f" and {args.damage_warmup_steps:.3g} steps" if args.damage_warmup_steps else "") + then
+    elif args.damage_warmup_steps:
+      sched = f"w=0 for {args.damage_warmup_steps:.3g} steps" + then
     else:
       sched = f"linear from 0 over {args.damage_ramp_steps:.3g} steps"
     spec = dict(spec, label=spec["label"].replace(")", f"; {sched})", 1),
-                damage_warmup_steps=int(args.damage_warmup_steps), damage_ramp_steps=int(args.damage_ramp_steps))
+                damage_warmup_steps=int(args.damage_warmup_steps), damage_ramp_steps=int(args.damage_ramp_steps),
+                **({"damage_warmup_completion": gate} if gate else {}))
   if args.init_from:
     src = os.path.basename(args.init_from) + ("" if args.init_seed is None else f" seed {args.init_seed}")
     spec = dict(spec, label=spec["label"] + f", actor from {src}"
@@ -211,6 +216,9 @@ def parse(argv):
   p.add_argument("--damage-warmup-steps", type=float, default=0.0,
                  help="penalty method: task reward alone (w = 0) for this many env steps per seed, then "
                       "--damage-weight (train/config.py, the penalty schedule)")
+  p.add_argument("--damage-warmup-completion", type=float, default=0.0, metavar="RATE",
+                 help="penalty method: w = 0 until a rollout's finished training episodes complete the task at "
+                      "this rate (0-1, per seed; and past --damage-warmup-steps if given), then the ramp")
   p.add_argument("--damage-ramp-steps", type=float, default=0.0,
                  help="penalty method: after the warm-up, w rises linearly to --damage-weight over this many env steps")
   p.add_argument("--redraw-starts-steps", type=float, default=0.0,
@@ -353,7 +361,10 @@ def parse(argv):
     p.error(f"--obs-clip: a finite number > 0, got {args.obs_clip}")
   if not (args.redraw_starts_steps >= 0 and float(args.redraw_starts_steps).is_integer()):
     p.error(f"--redraw-starts-steps: a whole number of env steps >= 0, got {args.redraw_starts_steps}")
-  for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps)):
+  if not 0 <= args.damage_warmup_completion <= 1:
+    p.error(f"--damage-warmup-completion: a rate in [0, 1], got {args.damage_warmup_completion}")
+  for flag, v in (("--damage-warmup-steps", args.damage_warmup_steps), ("--damage-ramp-steps", args.damage_ramp_steps),
+                  ("--damage-warmup-completion", args.damage_warmup_completion)):
     if not v >= 0:
       p.error(f"{flag}: must be >= 0, got {v}")
     if v and "penalty" not in args.methods:

@@ -30,6 +30,9 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--damage-warmup-steps", "-1"], "--damage-warmup-steps"),
     (["--damage-ramp-steps", "1e6", "--methods", "pid"], "--damage-ramp-steps"),
     (["--damage-warmup-steps", "1e6", "--damage-weight", "0"], "--damage-warmup-steps"),
+    (["--damage-warmup-completion", "1.5"], "--damage-warmup-completion"),
+    (["--damage-warmup-completion", "nan"], "--damage-warmup-completion"),
+    (["--damage-warmup-completion", "0.5", "--methods", "task_only"], "--damage-warmup-completion"),
     (["--timesteps", "-1"], "--timesteps"),
     (["--timesteps", "nan"], "--timesteps"),
     (["--anneal-lr"], "--anneal-lr"),  # over the default 1e9 steps it would barely decay
@@ -202,6 +205,17 @@ def test_damage_schedule_reaches_the_penalty_method():
   assert (pen["damage_warmup_steps"], pen["damage_ramp_steps"]) == (5_500_000, 1_000_000)
   assert "w=0 for 5.5e+06 steps, then linear to 2 over 1e+06" in pen["label"]
   assert "damage_warmup_steps" not in rl_multiseed.method_spec("task_only", a)
+
+
+def test_completion_gate_reaches_the_penalty_method():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty", "--damage-warmup-completion", "0.8",
+                          "--damage-ramp-steps", "4e6"])
+  pen = rl_multiseed.method_spec("penalty", a)
+  assert (pen["damage_warmup_completion"], pen["damage_warmup_steps"], pen["damage_ramp_steps"]) == (0.8, 0, 4_000_000)
+  assert "w=0 until training completion ≥ 80%, then linear to 2 over 4e+06" in pen["label"]
+  assert "damage_warmup_completion" not in rl_multiseed.method_spec("task_only", a)
+  plain = rl_multiseed.method_spec("penalty", rl_multiseed.parse(["--methods", "penalty"]))
+  assert "damage_warmup_completion" not in plain  # unchanged commands keep their settings
 
 
 EGG_POLICY = os.path.join(ROOT, "benchmarks", "results",

@@ -235,6 +235,59 @@ def test_damage_schedule_run(env, tmp_path):
   assert by_it == {0: {0.0}, 1: {0.0}, 2: {0.0}, 3: {1.0}, 4: {2.0}, 5: {2.0}, 6: {2.0}}, by_it
 
 
+def test_penalty_gate():
+  """The completion gate opens once, at the first rollout with finished episodes that completed the task at
+  the rate or more and past the step-count warm-up; then ``penalty_start`` stays where it was set."""
+  shut = jnp.int32(iteration.NOT_YET)
+  gate = lambda start, it, done, n, floor=0: int(iteration.penalty_gate(start, jnp.int32(it), jnp.float32(done),  # noqa: E731
+                                                                      jnp.float32(n), 0.5, floor))
+  assert gate(shut, 4, 0.0, 0.0) == iteration.NOT_YET  # no episode finished this rollout
+  assert gate(shut, 4, 7.0, 16.0) == iteration.NOT_YET  # 44 % < 50 %
+  assert gate(shut, 4, 8.0, 16.0) == 5  # 50 %: the next iteration ramps
+  assert gate(shut, 4, 16.0, 16.0, floor=6) == iteration.NOT_YET  # the step-count warm-up is not over
+  assert gate(jnp.int32(2), 9, 0.0, 16.0) == 2  # once open it stays open
+
+
+def _weights_by_iteration(out):
+  """{iteration: w it trained with} from a run's metrics rows (a row after iteration i carries i + 1)."""
+  by_it = {}
+  for r in _rows(out):
+    by_it.setdefault(r["iteration"] - 1, set()).add(round(r["damage_weight"], 6))
+  return by_it
+
+
+@pytest.mark.parametrize("tol", [1.0, 0.0])
+def test_damage_warmup_completion_run(tol, tmp_path):
+  """``damage_warmup_completion``: w stays 0 until a rollout's finished episodes complete the task at the
+  rate, past ``damage_warmup_steps``. The pusher's 24-step episodes all end in iterations 2, 5, … With a
+  1 m success radius 87–100 % of them complete, so the gate opens after iteration 5 (iteration 2's episodes
+  came before the 4-iteration floor) and the ramp runs over iterations 6–7; with a 0 m radius none does,
+  and w stays 0."""
+  out = str(tmp_path / "run")
+  res = train.train(PusherEnv(tol=tol), seeds=SEEDS, damage_weight=2.0, damage_warmup_completion=0.5,
+                    damage_warmup_steps=4 * ITER, damage_ramp_steps=2 * ITER, num_timesteps=8 * ITER,
+                    eval_every=ITER, out_dir=out, **TINY)
+  start = np.asarray(res.train_state.penalty_start)
+  if tol:
+    assert _weights_by_iteration(out) == {**{i: {0.0} for i in range(6)}, 6: {1.0}, 7: {2.0}}
+    assert np.all(start == 6), start
+    # iteration 2's episodes completed too: the floor, not the rate, kept the gate shut then
+    assert all(r["train/episode_completion"] >= 0.5 for r in _rows(out) if r["iteration"] in (3, 6))
+  else:
+    assert _weights_by_iteration(out) == {i: {0.0} for i in range(8)}
+    assert np.all(start == iteration.NOT_YET), start
+
+
+def test_damage_warmup_completion_validation():
+  with pytest.raises(ValueError, match="^damage_warmup_completion: must be <= 1"):
+    train.PPOConfig(damage_weight=2.0, damage_warmup_completion=1.5).validate()
+  with pytest.raises(ValueError, match="^damage_warmup_completion: must be a finite number"):
+    train.PPOConfig(damage_weight=2.0, damage_warmup_completion=float("nan")).validate()
+  with pytest.raises(ValueError, match="^damage_warmup_completion: gates"):
+    train.PPOConfig(damage_warmup_completion=0.5).validate()
+  assert train.PPOConfig.from_json({}).damage_warmup_completion == 0.0  # runs from before: no gate
+
+
 def test_annealed_entropy():
   """The entropy anneal: the configured coefficient at the first iteration, linear to 0 at the run's end, 0 after."""
   np.testing.assert_allclose(ppo.annealed_entropy(0.02, jnp.arange(6), 4), [0.02, 0.015, 0.01, 0.005, 0.0, 0.0])

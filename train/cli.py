@@ -99,6 +99,9 @@ CONFIG_FLAGS = (
      "penalty schedule: w = 0 (task reward alone) for this many env steps per seed, then --damage-weight"),
     ("--damage-ramp-steps", "damage_ramp_steps", _int,
      "penalty schedule: after the warm-up, w rises linearly to --damage-weight over this many env steps"),
+    ("--damage-warmup-completion", "damage_warmup_completion", float,
+     "penalty schedule: the warm-up lasts until the training episodes of a rollout complete the task at this "
+     "rate (0-1, per seed; after --damage-warmup-steps, if given), then the ramp starts"),
     ("--budget", "budget", float, "episode-cost budget ĉ: enables the multiplier λ"),
     ("--multiplier", "multiplier", str, f"how λ follows the cost: {' | '.join(MULTIPLIERS)} (with --budget)"),
     ("--lagrange-lr", "lagrange_lr", float, "plain Lagrangian: λ ← clip(λ + lr·(J_c − ĉ), 0, λ_max)"),

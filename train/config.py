@@ -124,6 +124,12 @@ class PPOConfig:
   # Item), a penalty from step 0 punishes every move towards the goal before any completion has been seen.
   damage_warmup_steps: int = 0
   damage_ramp_steps: int = 0
+  # > 0: the warm-up ends only once the task is being done — at the first iteration (past
+  # ``damage_warmup_steps``) whose finished training episodes completed the task at least at this rate, per
+  # seed; the ramp starts with the next iteration. Why: from scratch a penalty can stop the search before the
+  # task is found (Pick Egg: the untrained policy damages the egg in 71 % of episodes and lifts it in none,
+  # so w = 2 learns to keep still), and a fixed step count has to guess when each seed finds it.
+  damage_warmup_completion: float = 0.0
   budget: Optional[float] = None
   multiplier: str = "lagrangian"
   lagrange_lr: float = 0.1
@@ -278,6 +284,10 @@ class PPOConfig:
         raise ValueError(f"{name}: must be an integer >= 0 (env steps per seed), got {v!r}")
       if v and not self.damage_weight > 0:
         raise ValueError(f"{name}: schedules the damage weight; set damage_weight > 0 too (got {self.damage_weight!r})")
+    number("damage_warmup_completion", lo=0, hi=1)
+    if self.damage_warmup_completion and not self.damage_weight > 0:
+      raise ValueError("damage_warmup_completion: gates the damage weight's schedule; set damage_weight > 0 too "
+                       f"(got {self.damage_weight!r})")
     number("budget", lo=0, allow_none=True)
     for name in ("lagrange_lr", "lagrange_init", "lagrange_max", "pid_kp", "pid_ki", "pid_kd"):
       number(name, lo=0)

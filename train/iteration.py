@@ -91,6 +91,9 @@ class TrainState:
   has_cost_estimate: jax.Array  # f32[], 1.0 once any training episode has ended
   rng: jax.Array  # u32[2]
   iteration: jax.Array  # i32[]
+  # i32[], the iteration the penalty's ramp starts at (NOT_YET until the completion gate opens); None (no leaf)
+  # without ``damage_warmup_completion``, so checkpoints of runs without it keep their layout
+  penalty_start: Optional[jax.Array] = None
 
   @property
   def lagrange(self):
@@ -109,6 +112,18 @@ def scheduled_weight(damage_weight, iteration, warmup, ramp):
   t = (iteration - warmup).astype(jnp.float32)
   frac = jnp.clip((t + 1.0) / ramp, 0.0, 1.0) if ramp > 0 else (t >= 0).astype(jnp.float32)
   return damage_weight * frac
+
+
+NOT_YET = jnp.iinfo(jnp.int32).max  # penalty_start while the completion gate is shut
+
+
+def penalty_gate(start, iteration, completed, episodes, rate, min_iterations):
+  """``penalty_start`` (i32[]) after ``iteration``'s rollout: still ``start`` unless the gate is shut
+  (``start == NOT_YET``) and this rollout's ``episodes`` (f32[], finished) ``completed`` (f32[], how many of
+  them completed) the task at ``rate`` or more, with ``iteration + 1 >= min_iterations`` (the step-count
+  warm-up); then ``iteration + 1``, the first iteration to train with the ramp."""
+  opens = (episodes > 0) & (completed >= rate * episodes) & (iteration + 1 >= min_iterations)
+  return jnp.where((start == NOT_YET) & opens, iteration + 1, start).astype(jnp.int32)
 
 
 def max_abs_z(normalizer, observation):
@@ -197,6 +212,7 @@ class Trainer:
         has_cost_estimate=f32(0.0),
         rng=key,
         iteration=jnp.zeros((), jnp.int32),
+        penalty_start=jnp.asarray(NOT_YET, jnp.int32) if cfg.damage_warmup_completion > 0 else None,
     )
 
   def inference_params(self, ts: TrainState):
@@ -351,6 +367,8 @@ class Trainer:
   def damage_weight(self, ts: TrainState):
     """w of this iteration: ``ts.damage_weight`` under the config's penalty schedule (f32[])."""
     warmup, ramp = self.cfg.damage_schedule_iterations
+    if ts.penalty_start is not None:  # the completion gate decides when the warm-up ends
+      return scheduled_weight(ts.damage_weight, ts.iteration, ts.penalty_start, ramp)
     if not (warmup or ramp):
       return ts.damage_weight
     return scheduled_weight(ts.damage_weight, ts.iteration, warmup, ramp)
@@ -375,6 +393,10 @@ class Trainer:
     cost_estimate = jnp.where(n > 0, ended["cost"] / jnp.maximum(n, 1.0), ts.cost_estimate)
     has_estimate = jnp.maximum(ts.has_cost_estimate, (n > 0).astype(jnp.float32))
     mult = M.update(ts.multiplier, ts.multiplier_params, cost_estimate, has_estimate)
+    if ts.penalty_start is not None:
+      ts = ts.replace(penalty_start=penalty_gate(ts.penalty_start, ts.iteration, ended["completion"], n,
+                                                 self.cfg.damage_warmup_completion,
+                                                 self.cfg.damage_schedule_iterations[0]))
     ts, loss_metrics = self.update(ts, data)
     ts = ts.replace(multiplier=mult, cost_estimate=cost_estimate, has_cost_estimate=has_estimate,
                     iteration=ts.iteration + 1)
