@@ -521,12 +521,16 @@ def run_method(name: str, args, command: str, work: str) -> dict:
       finals[action].append(E.scalar_metrics(E.metrics(per_ep, env.entity_names, train.ppo.safe_threshold_of(env))))
   eval_s = time.perf_counter() - t0
   per_seed = []
+  gate = res.train_state.penalty_start  # i32[S] with the completion gate, else None
   for i, s in enumerate(args.seeds):
     rows = [r for r in res.history if r["seed"] == s]
     per_seed.append({"seed": s, "final_eval": finals[args.eval_actions[0]][i],
                      "final_eval_by_action": {a: finals[a][i] for a in args.eval_actions},
                      "time_to_80_safe_s": time_to_safe(rows),
                      "final_lambda": rows[-1].get("lagrange") if rows else None})
+    if gate is not None:  # env steps per seed at which w started to ramp; None: the gate never opened
+      start = int(gate[i])
+      per_seed[-1]["penalty_from_steps"] = None if start == train.iteration.NOT_YET else start * res.config.steps_per_iteration
   summary = summarise(per_seed)
   curves = f"rl_{name}_curves.png"
   return {
@@ -629,6 +633,12 @@ def write_results(base: str, payload: dict) -> None:
       lines.append(f"| {r['label']} | {p['seed']} | {e['completion']:.1%} | {e['safe_completion']:.1%} "
                    f"| {e['avg_env_health']:.2f} | {e['episode_cost']:.2f} | {'—' if t is None else f'{t:.0f}'} "
                    f"| {lam} |")
+  for r in payload["rows"]:  # the completion gate's opening, per seed (none without --damage-warmup-completion)
+    gated = [p for p in r["per_seed"] if "penalty_from_steps" in p]
+    if gated:
+      lines += ["", f"Penalty gate of {_labelled(r)}: w began to ramp at " + "; ".join(
+          f"seed {p['seed']}: " + ("never (w = 0 throughout)" if p["penalty_from_steps"] is None
+                                  else f"{p['penalty_from_steps']:,} env steps") for p in gated) + "."]
   lines += ["", "## Commands", ""]
   for r in payload["rows"]:
     lines.append(f"- {r['label']}: `{r['command']}` ({r['date']}, curves `{r['curves']}`)")

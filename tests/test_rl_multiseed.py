@@ -107,3 +107,19 @@ def test_combine_numbers_reruns_of_one_command(two_calls):
   assert len(labels) == 4 and len(set(labels)) == 4
   assert labels[0].endswith(" — run 1") and labels[2].endswith(" — run 2")
   assert labels[0].removesuffix(" — run 1") == labels[2].removesuffix(" — run 2")
+
+
+def test_completion_gate_is_reported_per_seed(tmp_path):
+  """--damage-warmup-completion: each seed's row records the env steps at which w began to ramp (the
+  iteration after its gate opened, a multiple of the 128 steps per iteration), and the table says so."""
+  d = str(tmp_path)
+  assert rl_multiseed.main(TOY + ["--methods", "penalty", "--damage-warmup-completion", "0.05", "--timesteps", "4096",
+                                  "--damage-ramp-steps", "256", "--tag", "gate", "--results-dir", d,
+                                  "--work-dir", d]) == 0
+  row = _load(os.path.join(d, "rl_pusherenv_cpu_gate.json"))["rows"][0]
+  assert row["train_kwargs"]["damage_warmup_completion"] == 0.05
+  for p in row["per_seed"]:
+    v = p["penalty_from_steps"]
+    assert v is None or (v > 0 and v % 128 == 0), p
+  with open(os.path.join(d, "rl_pusherenv_cpu_gate.md")) as f:
+    assert "Penalty gate of damage penalty (w=2; w=0 until training completion ≥ 5%" in f.read()
