@@ -192,6 +192,8 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
     schedule = ", ".join(x for x in (
         "cost critic" if kw.get("cost_critic") else "",
         f"penalty off for the first {kw['damage_warmup_steps'] / 1e6:g} M" if kw.get("damage_warmup_steps") else "",
+        f"penalty off until training completion ≥ {kw['damage_warmup_completion']:.0%}"
+        if kw.get("damage_warmup_completion") else "",
         f"w ramped over {kw['damage_ramp_steps'] / 1e6:g} M" if kw.get("damage_ramp_steps") else "",
         f"critic warm-up {kw['critic_warmup_iterations']} iterations" if kw.get("critic_warmup_iterations") else "",
         "lr annealed" if kw.get("anneal_learning_rate") else "",
