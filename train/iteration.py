@@ -393,7 +393,7 @@ class Trainer:
     cost_estimate = jnp.where(n > 0, ended["cost"] / jnp.maximum(n, 1.0), ts.cost_estimate)
     has_estimate = jnp.maximum(ts.has_cost_estimate, (n > 0).astype(jnp.float32))
     mult = M.update(ts.multiplier, ts.multiplier_params, cost_estimate, has_estimate)
-    if ts.penalty_start is not None:
+    if ts.penalty_start is not None:  # opens for the next iteration: update() below still sees this one's w
       ts = ts.replace(penalty_start=penalty_gate(ts.penalty_start, ts.iteration, ended["completion"], n,
                                                  self.cfg.damage_warmup_completion,
                                                  self.cfg.damage_schedule_iterations[0]))
