@@ -224,14 +224,20 @@ def test_scheduled_weight():
   np.testing.assert_allclose(ppo.scheduled_weight(2.0, it, 3, 0), [0, 0, 0, 2, 2, 2, 2, 2])
 
 
+def _weights_by_iteration(out):
+  """{iteration: w it trained with} from a run's metrics rows (a row after iteration i carries i + 1)."""
+  by_it = {}
+  for r in _rows(out):
+    by_it.setdefault(r["iteration"] - 1, set()).add(round(r["damage_weight"], 6))
+  return by_it
+
+
 def test_damage_schedule_run(env, tmp_path):
   """A run with the penalty schedule logs w per iteration: 0 for the warm-up, the ramp, then w."""
   out = str(tmp_path / "run")
   train.train(env, seeds=SEEDS, damage_weight=2.0, damage_warmup_steps=3 * ITER, damage_ramp_steps=2 * ITER,
               num_timesteps=7 * ITER, eval_every=ITER, out_dir=out, **TINY)
-  by_it = {}  # a row after iteration i (its "iteration" i + 1) carries the w that iteration trained with
-  for r in _rows(out):
-    by_it.setdefault(r["iteration"] - 1, set()).add(round(r["damage_weight"], 6))
+  by_it = _weights_by_iteration(out)
   assert by_it == {0: {0.0}, 1: {0.0}, 2: {0.0}, 3: {1.0}, 4: {2.0}, 5: {2.0}, 6: {2.0}}, by_it
 
 
@@ -246,14 +252,6 @@ def test_penalty_gate():
   assert gate(shut, 4, 8.0, 16.0) == 5  # 50 %: the next iteration ramps
   assert gate(shut, 4, 16.0, 16.0, floor=6) == iteration.NOT_YET  # the step-count warm-up is not over
   assert gate(jnp.int32(2), 9, 0.0, 16.0) == 2  # once open it stays open
-
-
-def _weights_by_iteration(out):
-  """{iteration: w it trained with} from a run's metrics rows (a row after iteration i carries i + 1)."""
-  by_it = {}
-  for r in _rows(out):
-    by_it.setdefault(r["iteration"] - 1, set()).add(round(r["damage_weight"], 6))
-  return by_it
 
 
 @pytest.mark.parametrize("tol", [1.0, 0.0])
