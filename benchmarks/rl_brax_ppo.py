@@ -537,8 +537,11 @@ def parse_args(argv=None):
   p.add_argument("--eval-task-settings", default=None, metavar="JSON",
                  help="task keywords changed for every evaluation over the training ones, e.g. "
                       "'{\"start\": \"in_front\"}' after --task-settings '{\"start\": \"route\"}'; rows record them")
-  p.add_argument("--out-dir", default=RESULTS)
-  p.add_argument("--out", default=None, help="results stem (default OUT_DIR/rl_brax_<task>_<device>)")
+  p.add_argument("--out-dir", default=None,
+                 help="folder of the results (default benchmarks/results); a relative --out goes inside it")
+  p.add_argument("--out", default=None,
+                 help="results stem (default OUT_DIR/rl_brax_<task>_<device>); relative to --out-dir when that "
+                      "is given, else to the working directory")
   p.add_argument("--export-policy", action="store_true",
                  help="also write each run's final policy beside the results, STEM_w<W>_s<SEED>_policy.npz "
                       "(our checkpoint format, ≈ 0.05 MB: re-scored by policy_recheck.py or eval, or an "
@@ -643,10 +646,18 @@ def merge(docs: list[dict], stem: str, shared_card: int = 1) -> dict:
   return out
 
 
+def results_stem(a, device: str) -> str:
+  """Where a call writes STEM.json / .md: ``--out`` inside ``--out-dir`` when both are given (an absolute
+  ``--out`` stays as it is), else ``--out`` as given, else OUT_DIR/rl_brax_<task>_<device>."""
+  if a.out is None:
+    return os.path.join(a.out_dir or RESULTS, f"rl_brax_{a.task}_{device}")
+  return a.out if a.out_dir is None else os.path.join(a.out_dir, a.out)
+
+
 def main(argv=None) -> int:
   a = parse_args(argv)
   if a.merge is not None:
-    stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug(a.merge_docs[0]['device'])}")
+    stem = results_stem(a, device_slug(a.merge_docs[0]["device"]))
     merged = merge(a.merge_docs, stem, a.shared_card)
     print(f"wrote {stem}.json / .md ({len(merged['rows'])} rows)")
     return 0
@@ -658,7 +669,7 @@ def main(argv=None) -> int:
              eval_episodes=a.eval_episodes, **({} if a.init_log_std is None else {"init_log_std": list(a.init_log_std)}),
              **({} if a.max_grad_norm is None else {"max_grad_norm": a.max_grad_norm}),
              **({} if a.obs_clip is None else {"obs_clip": a.obs_clip}))
-  stem = a.out or os.path.join(a.out_dir, f"rl_brax_{a.task}_{device_slug()}")
+  stem = results_stem(a, device_slug())
   cont = None if a.continue_from is None else check_continue(
       a.continue_from, a.task, a.settings, a.eval_settings, a.weights, a.seed_list, cfg, a.init)
   if a.export_policy:  # a policy file is a run's only copy of its weights: never replaced, refused before training

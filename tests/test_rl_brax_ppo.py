@@ -179,6 +179,17 @@ def test_merge_combines_the_files_of_separate_processes_into_one_table(tmp_path)
   assert md.count("| w 2.0 |") == 2 and "| 2026-11-29 05:50 |" in md and "| 2026-11-30 07:00 |" in md
 
 
+def test_out_goes_inside_out_dir_when_both_are_given(tmp_path):
+  """A relative --out names a file inside --out-dir (a device call's results folder), not the working directory;
+  without --out-dir it stays relative to the working directory, as before; an absolute --out stays as it is."""
+  stem = lambda argv: R.results_stem(R.parse_args(["--task", "pick_egg"] + argv), "dev")  # noqa: E731
+  assert stem(["--out-dir", str(tmp_path), "--out", "run_w0"]) == str(tmp_path / "run_w0")
+  assert stem(["--out", "run_w0"]) == "run_w0"
+  assert stem(["--out-dir", str(tmp_path), "--out", "/abs/run"]) == "/abs/run"
+  assert stem(["--out-dir", str(tmp_path)]) == str(tmp_path / "rl_brax_pick_egg_dev")
+  assert stem([]) == os.path.join(R.RESULTS, "rl_brax_pick_egg_dev")
+
+
 def test_merge_records_runs_that_shared_one_device(tmp_path):
   """--shared-card N: the merged rows say their runs ran N at a time, and their time to 80 % says so."""
   import json
