@@ -260,7 +260,7 @@ def test_damage_warmup_completion_run(tol, tmp_path):
   rate, past ``damage_warmup_steps``. The pusher's 24-step episodes all end in iterations 2, 5, … With a
   1 m success radius 87–100 % of them complete, so the gate opens after iteration 5 (iteration 2's episodes
   came before the 4-iteration floor) and the ramp runs over iterations 6–7; with a 0 m radius none does,
-  and w stays 0."""
+  w stays 0, and the run's weights are those of a task-reward run of the same seeds."""
   out = str(tmp_path / "run")
   res = train.train(PusherEnv(tol=tol), seeds=SEEDS, damage_weight=2.0, damage_warmup_completion=0.5,
                     damage_warmup_steps=4 * ITER, damage_ramp_steps=2 * ITER, num_timesteps=8 * ITER,
@@ -274,6 +274,11 @@ def test_damage_warmup_completion_run(tol, tmp_path):
   else:
     assert _weights_by_iteration(out) == {i: {0.0} for i in range(8)}
     assert np.all(start == iteration.NOT_YET), start
+    # while shut, the gate changes nothing else: the same seeds train to the same weights under task reward
+    plain = train.train(PusherEnv(tol=tol), seeds=SEEDS, num_timesteps=8 * ITER, eval_every=ITER,
+                        out_dir=str(tmp_path / "plain"), **TINY)
+    for a, b in zip(jax.tree.leaves(res.train_state.params), jax.tree.leaves(plain.train_state.params)):
+      np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
 def test_damage_warmup_completion_validation():
