@@ -90,6 +90,7 @@ from brax.training.agents.ppo import networks as ppo_networks  # noqa: E402
 from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
 import tasks  # noqa: E402
+from mjx_damage import runtime  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 from train import checkpoint as ckpt  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
@@ -546,6 +547,9 @@ def parse_args(argv=None):
                  help="also write each run's final policy beside the results, STEM_w<W>_s<SEED>_policy.npz "
                       "(our checkpoint format, ≈ 0.05 MB: re-scored by policy_recheck.py or eval, or an "
                       "--init-from of either trainer)")
+  p.add_argument("--deterministic", action="store_true",
+                 help="deterministic XLA GPU kernels: a rerun of a seed repeats it bit for bit, at 0.72–0.94× the "
+                      "throughput on an H200 (mjx_damage.runtime); CPU runs repeat without it")
   p.add_argument("--shared-card", type=int, default=1, metavar="N",
                  help="the runs of this call (or, with --merge, of the merged files) ran N at a time on one device: "
                       "rows record it and their seconds are not compared with runs that had the device alone")
@@ -563,6 +567,8 @@ def parse_args(argv=None):
       raise ValueError(f"merge: files of one task only, got tasks {tasks_seen}")
     a.task = tasks_seen[0]
     return a
+  if a.deterministic:  # before anything starts a backend: XLA reads its flags once
+    runtime.use_deterministic_gpu_ops("deterministic")
   tasks.task_class(a.task)  # ValueError listing the valid names, before anything compiles
   a.weights = _csv(a.damage_weights, float, "damage_weights")
   a.seed_list = _csv(a.seeds, int, "seeds")
@@ -663,6 +669,8 @@ def main(argv=None) -> int:
     return 0
   command = "python benchmarks/rl_brax_ppo.py " + " ".join(
       shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+  if runtime.deterministic_gpu_ops() and not a.deterministic:  # set through XLA_FLAGS: the same run
+    command += " --deterministic"
   cfg = dict(PLAYGROUND_PANDA_PICK_CUBE, num_timesteps=a.num_timesteps, num_envs=a.num_envs,
              batch_size=a.batch_size, num_minibatches=a.num_minibatches, unroll_length=a.unroll_length,
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,

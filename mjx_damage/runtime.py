@@ -37,6 +37,15 @@ with the older elemental emitters, which take 0.35 ms for the 8-hinge chain
 knows this flag and aborts the process on an unknown XLA flag, so it is added
 only for jaxlib < 0.11 (:func:`cpu_flags`).
 
+**Deterministic GPU kernels** (opt-in: :func:`use_deterministic_gpu_ops`, the ``--deterministic`` option
+of ``mjx-damage train``, ``benchmarks/rl_multiseed.py`` and ``benchmarks/rl_brax_ppo.py``). XLA's GPU
+scatter-adds and reductions accumulate in whatever order the threads finish, so two runs of one seed part
+after a few million env steps (on Pick Egg, one found the grip and the other kept still). With
+``--xla_gpu_deterministic_ops=true`` XLA picks kernels with a fixed order: two runs of one command on two
+H200s gave identical curves and final policies, at 0.73–0.76× (our trainer) and 0.72–0.94× (Brax's PPO)
+the training throughput of runs without it (``benchmarks/training_repeatability.py``; docs/safe_rl.md,
+"Repeatable GPU runs"). CPU runs are repeatable without it.
+
 **Persistent compilation cache** (``MJX_DAMAGE_CACHE_DIR=<dir>`` to move it,
 ``MJX_DAMAGE_CACHE_DIR=off`` to switch it off). Compiling a task step takes
 15–30 s on a laptop CPU; with JAX's persistent cache the second run of the same
@@ -122,6 +131,33 @@ def configure_xla_cpu() -> bool:
   flags = xla_flags_with_cpu_fix(flags, wanted)
   os.environ["XLA_FLAGS"] = flags
   return all(f in flags for f in wanted)
+
+
+GPU_DETERMINISM_FLAG = "--xla_gpu_deterministic_ops=true"
+
+
+def deterministic_gpu_ops() -> bool:
+  """True when ``XLA_FLAGS`` asks XLA for deterministic GPU kernels (:data:`GPU_DETERMINISM_FLAG`)."""
+  return GPU_DETERMINISM_FLAG in os.environ.get("XLA_FLAGS", "").split()
+
+
+def use_deterministic_gpu_ops(field: str = "--deterministic") -> None:
+  """Add :data:`GPU_DETERMINISM_FLAG` to ``XLA_FLAGS`` so that a rerun of a GPU run repeats it bit for bit.
+
+  Call before anything starts a JAX backend (XLA reads its flags once). Raises ValueError naming
+  ``field`` when ``XLA_FLAGS`` already sets the flag to another value, RuntimeError when a backend is
+  already running. Costs throughput on a GPU (module docstring); on a CPU it changes nothing.
+  """
+  if deterministic_gpu_ops():
+    return
+  flags = os.environ.get("XLA_FLAGS", "")
+  if _name(GPU_DETERMINISM_FLAG) in flags:
+    raise ValueError(f"{field}: XLA_FLAGS already sets {_name(GPU_DETERMINISM_FLAG)} to another value "
+                     f"({flags!r}); drop it from XLA_FLAGS or leave out {field}")
+  if backends_started():
+    raise RuntimeError(f"{field}: JAX's backends already started, so XLA would ignore {GPU_DETERMINISM_FLAG}; "
+                       "ask for it before the first computation, or export XLA_FLAGS before starting Python")
+  os.environ["XLA_FLAGS"] = (flags + " " + GPU_DETERMINISM_FLAG).strip()
 
 
 def cache_dir() -> str | None:
