@@ -38,7 +38,6 @@ Example (Place Plate, the committed H100/H200 files of the three trainers)::
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shlex
 import sys
@@ -69,10 +68,9 @@ def parse(argv=None):
   a.docs = []
   for path in a.sources:
     try:
-      with open(path) as f:
-        doc = json.load(f)
-    except (OSError, json.JSONDecodeError) as e:
-      p.error(f"--sources: cannot read {path!r} ({e})")
+      doc = io.read_json(path, "--sources")
+    except ValueError as e:
+      p.error(str(e))
     kind = source_kind(doc)
     if kind is None:
       p.error(f"--sources: {path!r} is not a results file of rl_multiseed.py or rl_brax_ppo.py")

@@ -24,7 +24,6 @@ Example (``--deterministic`` on two H200s; docs/safe_rl.md, "Repeatable GPU runs
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import shlex
@@ -34,6 +33,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from mjx_damage import io  # noqa: E402
+from trainer_table import source_kind  # noqa: E402  (sibling script: one test of which trainer wrote a file)
 
 # Keys whose values are clock readings (or follow from them) or bookkeeping, never compared.
 CLOCK_WORDS = ("wall", "date", "seconds", "throughput", "timings", "stopped_by", "command", "calls", "curves",
@@ -57,16 +57,6 @@ def flatten(value, path: str = "") -> dict:
   else:
     out[path] = value
   return out
-
-
-def kind(doc: dict) -> str:
-  """'ours' (rl_multiseed.py) or 'brax' (rl_brax_ppo.py), from the rows' fields."""
-  rows = doc.get("rows") or []
-  if rows and "per_seed" in rows[0]:
-    return "ours"
-  if rows and "curve" in rows[0]:
-    return "brax"
-  raise ValueError("results: neither an rl_multiseed.py nor an rl_brax_ppo.py results file (no rows)")
 
 
 def row_key(row: dict) -> str:
@@ -114,14 +104,13 @@ def final_scores(row: dict) -> list[list[float]]:
   return [[e["completion"], e["safe_completion"]] for e in evals]
 
 
-def load(path: str) -> dict:
-  try:
-    with open(path) as f:
-      doc = json.load(f)
-  except (OSError, json.JSONDecodeError) as e:
-    raise ValueError(f"results: cannot read {path}: {e}") from None
-  kind(doc)
-  return doc
+def load(path: str, field: str) -> tuple[str, dict]:
+  """(trainer, results) of an rl_multiseed.py ("ours") or rl_brax_ppo.py ("brax") results file."""
+  doc = io.read_json(path, field)
+  kind = source_kind(doc)
+  if kind is None:
+    raise ValueError(f"{field}: {path!r} is not a results file of rl_multiseed.py or rl_brax_ppo.py")
+  return kind, doc
 
 
 def parse(argv=None):
@@ -133,13 +122,15 @@ def parse(argv=None):
   p.add_argument("--out", required=True, help="output path without extension: writes OUT.md and OUT.json")
   a = p.parse_args(argv)
   try:
-    a.docs = [load(a.a), load(a.b)]
-    a.base_docs = [load(path) for path in a.baseline]
+    runs = [load(a.a, "a"), load(a.b, "b")]
+    base = [load(path, "--baseline") for path in a.baseline]
   except ValueError as e:
     p.error(str(e))
-  kinds = {kind(d) for d in a.docs + a.base_docs}
-  if len(kinds) != 1:
-    p.error(f"--baseline: files of one trainer only, got {sorted(kinds)}")
+  if runs[0][0] != runs[1][0]:
+    p.error(f"b: a results file of {runs[1][0]}'s trainer, a of {runs[0][0]}'s")
+  if any(k != runs[0][0] for k, _ in base):
+    p.error(f"--baseline: results files of the compared runs' trainer ({runs[0][0]}) only")
+  a.docs, a.base_docs = [d for _, d in runs], [d for _, d in base]
   return a
 
 

@@ -55,6 +55,15 @@ def write_text(path: str, text: str) -> None:
   write_bytes(path, text.encode("utf-8"))
 
 
+def read_json(path: str, field: str) -> Any:
+  """The JSON value in ``path``; a missing, unreadable or corrupt file raises ValueError naming ``field``."""
+  try:
+    with open(path) as f:
+      return json.load(f)
+  except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+    raise ValueError(f"{field}: cannot read {path!r} ({e})") from None
+
+
 def write_json(path: str, obj: Any, indent: int = 2) -> None:
   write_text(path, json.dumps(obj, indent=indent, default=_jsonable) + "\n")
 
