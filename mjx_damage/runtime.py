@@ -40,7 +40,7 @@ only for jaxlib < 0.11 (:func:`cpu_flags`).
 **Deterministic GPU kernels** (opt-in: :func:`use_deterministic_gpu_ops`, the ``--deterministic`` option
 of ``mjx-damage train``, ``benchmarks/rl_multiseed.py`` and ``benchmarks/rl_brax_ppo.py``). XLA's GPU
 scatter-adds and reductions accumulate in whatever order the threads finish, so two runs of one seed part
-after a few million env steps (on Pick Egg, one found the grip and the other kept still). With
+from their first logged values on, and can end apart (on Pick Egg, one found the grip, the other kept still). With
 ``--xla_gpu_deterministic_ops=true`` XLA picks kernels with a fixed order: two runs of one command on two
 H200s gave identical curves and final policies, at 0.73–0.76× (our trainer) and 0.72–0.94× (Brax's PPO)
 the training throughput of runs without it (``benchmarks/training_repeatability.py``; docs/safe_rl.md,
