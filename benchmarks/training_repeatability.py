@@ -59,12 +59,14 @@ def flatten(value, path: str = "") -> dict:
   return out
 
 
-def row_key(row: dict) -> str:
-  return row["method"] if "per_seed" in row else f"w={row['damage_weight']:g} seed {row['seed']}"
-
-
 def _like(row: dict) -> str:
+  """What a baseline row must share with a compared one: its method (ours) or damage weight (Brax)."""
   return row["method"] if "per_seed" in row else f"w={row['damage_weight']:g}"
+
+
+def row_key(row: dict) -> str:
+  """One run's row: ours holds all its seeds, a Brax row one seed."""
+  return _like(row) if "per_seed" in row else f"{_like(row)} seed {row['seed']}"
 
 
 def first_step_apart(a: dict, b: dict) -> float | None:
