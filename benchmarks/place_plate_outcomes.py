@@ -16,6 +16,13 @@ episode this script finds:
 - *touchdown speed*: the plate's mean downward speed over the control step in which it reaches the counter;
 - the plate's final health and the lowest height the hand brought it to while holding it.
 
+Besides the policy's own actions (``mode``, ``sample``, ``mean``), ``--actions`` takes two mixtures that say
+which dimension's noise a mode policy lacks: ``arm_noise`` (the sampled action on the arm's dimensions, the mode
+on the gripper) and ``gripper_noise`` (the reverse). With ``--spread``, for ``mode`` it also reports the spread of the sampled
+action before the tanh (the std of the arctanh of ``SPREAD_DRAWS`` draws, per dimension: the Gaussian's scale) at
+the first and the last step of each mode episode: a policy whose std is an output of its network can raise its
+noise where its mean stalls.
+
 Writes ``benchmarks/results/place_plate_outcomes[_<tag>].{json,md}`` with the command. Each (action, network
 shape) compiles once; the weights are data, so every checkpoint of one shape reuses the program.
 
@@ -49,17 +56,24 @@ from train import networks as N  # noqa: E402
 
 TASK = "place_plate"
 OUTCOMES = ("placed", "let go, not placed", "never let go")
+NOISE_ACTIONS = ("arm_noise", "gripper_noise")  # the sampled action on these dimensions, the mode on the rest
+ACTIONS = N.POLICY_ACTIONS + NOISE_ACTIONS
+SPREAD_DRAWS = 256  # sampled actions per state for the spread at an episode's first and last step
 
 
 def parse(argv=None):
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
   p.add_argument("--policies", required=True,
                  help="comma-separated checkpoint files of place_plate policies, each FILE#SEED (FILE alone: its first seed)")
-  p.add_argument("--actions", default="mode,sample", help=f"comma-separated of {', '.join(N.POLICY_ACTIONS)}")
+  p.add_argument("--actions", default="mode,sample",
+                 help=f"comma-separated of {', '.join(ACTIONS)} (the last two: the sampled action on the arm's or "
+                      "the gripper's dimensions only, the mode on the others)")
   p.add_argument("--episodes", type=int, default=64)
   p.add_argument("--seed", type=int, default=12345, help="episode key (resets and sampled actions)")
   p.add_argument("--clearance", type=float, default=0.005,
                  help="m: inner gap beyond the plate's width at which the fingers count as let go")
+  p.add_argument("--spread", action="store_true",
+                 help="with the mode: also the sampled action's spread at each mode episode's first and last step")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="task keyword over every policy's own settings")
   p.add_argument("--tag", default="")
@@ -72,9 +86,9 @@ def parse(argv=None):
     for s in args.specs:
       R.parse_policy_spec("checkpoint:" + s)
     args.action_list = [a.strip() for a in args.actions.split(",") if a.strip()]
-    bad = [a for a in args.action_list if a not in N.POLICY_ACTIONS]
+    bad = [a for a in args.action_list if a not in ACTIONS]
     if bad or not args.action_list:
-      raise ValueError(f"actions: {', '.join(bad) or '(none)'} not among {', '.join(N.POLICY_ACTIONS)}")
+      raise ValueError(f"actions: {', '.join(bad) or '(none)'} not among {', '.join(ACTIONS)}")
     E.check_args(args.episodes, 1.0, 95.0, seed=args.seed)
     if not (np.isfinite(args.clearance) and 0.0 <= args.clearance < 0.05):
       raise ValueError(f"clearance: {args.clearance!r} must be in [0, 0.05) m")
@@ -108,6 +122,44 @@ def episodes_program(env, apply, steps: int):
 
     (state, _), rows = jax.lax.scan(body, (state, jnp.zeros((), state.done.dtype)), jnp.arange(steps))
     return rows + (state.info["entity_health"],)
+
+  return jax.jit(jax.vmap(one, in_axes=(None, 0)))
+
+
+def noise_mixture(mode_apply, sample_apply, action: str):
+  """``apply(params, state, key)``: the sampled action on the dimensions ``action`` names (``arm_noise``: every
+  dimension but the last; ``gripper_noise``: the last), the mode on the others; the same key as ``sample``."""
+  if action not in NOISE_ACTIONS:
+    raise ValueError(f"action: {action!r} is not one of {', '.join(NOISE_ACTIONS)}")
+
+  def apply(params, state, key):
+    a = mode_apply(params, state, key)
+    b = sample_apply(params, state, key)
+    gripper = jnp.arange(a.shape[-1]) == a.shape[-1] - 1
+    return jnp.where(gripper if action == "gripper_noise" else ~gripper, b, a)
+
+  return apply
+
+
+def spread_program(env, mode_apply, sample_apply, steps: int):
+  """``run(params, keys) -> f32[B, 2, A]``: per episode of the mode policy, the std of ``SPREAD_DRAWS`` sampled
+  actions at its first and its last control step, before the tanh (arctanh of each draw): the Gaussian's scale."""
+
+  def spread(params, state, key):
+    draws = jax.vmap(lambda k: sample_apply(params, state, k))(jax.random.split(key, SPREAD_DRAWS))
+    # before the tanh: where the mean saturates it, the squashed draws' spread shrinks whatever the scale
+    return jnp.std(jnp.arctanh(jnp.clip(draws, -1.0 + 1e-6, 1.0 - 1e-6)), axis=0)
+
+  def one(params, key):
+    reset_key, act_key = jax.random.split(key)
+    state = env.reset(reset_key)
+    first = spread(params, state, jax.random.fold_in(act_key, steps))  # keys apart from the steps' 0 … T − 2
+
+    def body(state, t):
+      return env.step(state, mode_apply(params, state, jax.random.fold_in(act_key, t))), None
+
+    state, _ = jax.lax.scan(body, state, jnp.arange(steps - 1))
+    return jnp.stack([first, spread(params, state, jax.random.fold_in(act_key, steps + 1))])
 
   return jax.jit(jax.vmap(one, in_axes=(None, 0)))
 
@@ -176,6 +228,17 @@ def render_md(res: dict) -> str:
     lines.append(f"| {os.path.basename(r['file'])} | {r['seed']} | {r['action']} | {100 * f['placed']:.1f} % | "
                  f"{100 * f['let go, not placed']:.1f} % | {100 * f['never let go']:.1f} % | {rh} | {nh} | {tv} | "
                  f"{100 * s['plate_intact_rate']:.1f} % |")
+  spread = [r for r in res["rows"] if "sampled_spread_first_step" in r["summary"]]
+  if spread:
+    lines += ["", f"Spread of the sampled action before the tanh (std of the arctanh of {SPREAD_DRAWS} draws: the "
+              "Gaussian's scale; arm dimensions, then the gripper) at the first and the last step of each mode "
+              "episode, mean over episodes:", "",
+              "| policy | seed | first step | last step |", "|---|---|---|---|"]
+    for r in spread:
+      s = r["summary"]
+      lines.append(f"| {os.path.basename(r['file'])} | {r['seed']} | "
+                   f"{' / '.join(f'{v:.2f}' for v in s['sampled_spread_first_step'])} | "
+                   f"{' / '.join(f'{v:.2f}' for v in s['sampled_spread_last_step'])} |")
   return "\n".join(lines) + "\n"
 
 
@@ -190,10 +253,14 @@ def main(argv=None) -> int:
          "task_kwargs": args.overrides, "rows": []}
   for spec in args.specs:
     for action in args.action_list:
-      policy = R.make_policy(f"checkpoint{'' if action == 'mode' else '+' + action}:{spec}", env)
+      own = action if action in N.POLICY_ACTIONS else "mode"
+      policy = R.make_policy(f"checkpoint{'' if own == 'mode' else '+' + own}:{spec}", env)
+      mixed = action != own or (action == "mode" and args.spread)
+      sampled = R.make_policy(f"checkpoint+sample:{spec}", env) if mixed else None
+      apply = noise_mixture(policy.apply, sampled.apply, action) if action != own else policy.apply
       shape = (action, repr(jax.tree.map(lambda x: (x.shape, str(x.dtype)), policy.params)))
       if shape not in programs:  # one compile per (action, network shape); the weights are an argument
-        programs[shape] = episodes_program(env, policy.apply, steps)
+        programs[shape] = episodes_program(env, apply, steps)
       plate, gap, success, health = jax.device_get(programs[shape](policy.params, keys))
       # the program is episode-major [B, T, ...]; classify reads time-major [T, B, ...]
       plate, gap, success = (np.swapaxes(np.asarray(x), 0, 1) for x in (plate, gap, success))
@@ -202,6 +269,13 @@ def main(argv=None) -> int:
       ph = np.asarray(health)[:, plate_entity]
       row = {"file": R.checkpoint_path("checkpoint:" + spec), "seed": policy.seed, "action": action,
              "summary": summarise(c, ph), "outcome_per_episode": c["outcome"].tolist()}
+      if action == "mode" and args.spread:
+        key = ("spread",) + shape[1:]
+        if key not in programs:
+          programs[key] = spread_program(env, policy.apply, sampled.apply, steps)
+        spread = np.asarray(jax.device_get(programs[key](policy.params, keys)))
+        row["summary"]["sampled_spread_first_step"] = spread[:, 0].mean(0).round(4).tolist()
+        row["summary"]["sampled_spread_last_step"] = spread[:, 1].mean(0).round(4).tolist()
       res["rows"].append(row)
       f = row["summary"]["fractions"]
       print(f"{os.path.basename(row['file'])}#{policy.seed} {action}: " +

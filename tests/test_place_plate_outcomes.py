@@ -77,3 +77,31 @@ def test_a_committed_policy(tmp_path):
   assert sum(row["summary"]["fractions"].values()) == pytest.approx(1.0)
   assert "| rl_brax_place_plate_box_h200_alone_s4_w2_s4_policy.npz | 4 | mode |" in open(
       tmp_path / "place_plate_outcomes_t.md").read()
+
+
+def test_noise_mixture_takes_the_sample_on_the_named_dimensions_only():
+  """arm_noise: the sampled action on every dimension but the last (the gripper), the mode there; gripper_noise:
+  the reverse. An unknown mixture is refused."""
+  import jax.numpy as jnp
+  mode = lambda params, state, key: jnp.zeros(4)
+  sample = lambda params, state, key: jnp.arange(1.0, 5.0)
+  np.testing.assert_array_equal(outcomes.noise_mixture(mode, sample, "arm_noise")(None, None, None), [1, 2, 3, 0])
+  np.testing.assert_array_equal(outcomes.noise_mixture(mode, sample, "gripper_noise")(None, None, None), [0, 0, 0, 4])
+  with pytest.raises(ValueError, match="action: 'sample'"):
+    outcomes.noise_mixture(mode, sample, "sample")
+
+
+def test_spread_is_measured_at_the_first_and_the_last_step():
+  """A stand-in env whose state counts the steps and a policy whose second dimension's noise grows with it: the
+  scale before the tanh is ~(0.5, 0) at the first step and ~(0.5, 0.1·(T − 1)) after the mode's T − 1 steps."""
+  import jax
+  import jax.numpy as jnp
+  from types import SimpleNamespace
+  env = SimpleNamespace(reset=lambda key: jnp.zeros(()), step=lambda x, a: x + 1.0 + 0.0 * a.sum())
+  mode = lambda params, x, key: jnp.zeros(2)
+  # tanh-squashed, the first dimension's mean far out on the tanh: its scale is found before the squash
+  sample = lambda params, x, key: jnp.tanh(jnp.array([2.0, 0.0]) + jax.random.normal(key, (2,)) * jnp.stack([0.5, 0.1 * x]))
+  s = np.asarray(outcomes.spread_program(env, mode, sample, 5)(None, jax.random.split(jax.random.PRNGKey(0), 3)))
+  assert s.shape == (3, 2, 2)
+  np.testing.assert_allclose(s[:, 0], [[0.5, 0]] * 3, atol=0.07)
+  np.testing.assert_allclose(s[:, 1], [[0.5, 0.4]] * 3, atol=0.07)
