@@ -189,6 +189,9 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
     actor = f"actor from {os.path.basename(init)}" + (f" seed {kw['init_seed']}" if "init_seed" in kw else "") if init else ""
     schedule = ", ".join(x for x in (
         "cost critic" if kw.get("cost_critic") else "",
+        # presets' other choices, named only where a run changed them (train.config.PPOConfig)
+        f"std a {kw['policy_std']}" if kw.get("policy_std") else "",
+        f"target-KL rule {kw['target_kl_rule']}" if kw.get("target_kl_rule") else "",
         f"penalty off for the first {kw['damage_warmup_steps'] / 1e6:g} M" if kw.get("damage_warmup_steps") else "",
         f"penalty off until training completion ≥ {kw['damage_warmup_completion']:.0%}"
         if kw.get("damage_warmup_completion") else "",

@@ -219,3 +219,23 @@ def test_files_from_before_the_panda_default_group_with_runs_naming_the_gripper(
     groups = json.load(f)["groups"]
   seeds = sorted((g["settings"], g["seeds"]) for g in groups)
   assert seeds == [("obs_mode=paper, robot=gripper", [0, 1]), ("obs_mode=paper, robot=panda", [2])]
+
+
+def test_a_run_with_the_std_a_parameter_or_another_kl_rule_is_its_own_group(tmp_path):
+  """policy_std and target_kl_rule change what a run learns: runs naming them are not pooled with the preset's."""
+  doc = {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "eval_episodes": 1024,
+         "rows": [_ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.5), (1.0, 0.9))]),
+                  _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.95), (1.0, 0.9))], policy_std="parameter"),
+                  _ours_row("paper", "paper", 2.0, [(0, (0.1, 0.0), (0.1, 0.0))], target_kl_rule="epoch",
+                            policy_std="parameter")]}
+  path, out = str(tmp_path / "ours.json"), str(tmp_path / "table")
+  with open(path, "w") as f:
+    json.dump(doc, f)
+  assert T.main(["--task", "place_plate", "--action", "mode", "--sources", path, "--out", out]) == 0
+  with open(out + ".json") as f:
+    groups = json.load(f)["groups"]
+  ours = sorted((g["settings"], g["safe_completion"]["mean"]) for g in groups if g["trainer"].startswith("ours"))
+  assert len(ours) == 2 and "std a parameter" in ours[1][0] and "std a" not in ours[0][0]
+  assert ours[1][1] == pytest.approx(0.95)
+  (paper,) = [g for g in groups if g["trainer"] == T.PAPER]
+  assert "std a parameter" in paper["settings"] and "target-KL rule epoch" in paper["settings"]
