@@ -18,10 +18,10 @@ episode this script finds:
 
 Besides the policy's own actions (``mode``, ``sample``, ``mean``), ``--actions`` takes two mixtures that say
 which dimension's noise a mode policy lacks: ``arm_noise`` (the sampled action on the arm's dimensions, the mode
-on the gripper) and ``gripper_noise`` (the reverse). With ``--spread``, for ``mode`` it also reports the spread of the sampled
-action before the tanh (the std of the arctanh of ``SPREAD_DRAWS`` draws, per dimension: the Gaussian's scale) at
-the first and the last step of each mode episode: a policy whose std is an output of its network can raise its
-noise where its mean stalls.
+on the gripper) and ``gripper_noise`` (the reverse). With ``--spread``, for ``mode`` it also reports the spread
+of the sampled action before the tanh (the std of the arctanh of ``SPREAD_DRAWS`` draws, per dimension: the
+Gaussian's scale) at the first and the last step of each mode episode: a policy whose std is an output of its
+network can make its noise smaller or larger where its mean stalls; one whose std is a parameter cannot.
 
 Writes ``benchmarks/results/place_plate_outcomes[_<tag>].{json,md}`` with the command. Each (action, network
 shape) compiles once; the weights are data, so every checkpoint of one shape reuses the program.
@@ -73,7 +73,8 @@ def parse(argv=None):
   p.add_argument("--clearance", type=float, default=0.005,
                  help="m: inner gap beyond the plate's width at which the fingers count as let go")
   p.add_argument("--spread", action="store_true",
-                 help="with the mode: also the sampled action's spread at each mode episode's first and last step")
+                 help="with the mode: also the sampled action's scale before the tanh at each mode episode's first "
+                      "and last step")
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="task keyword over every policy's own settings")
   p.add_argument("--tag", default="")

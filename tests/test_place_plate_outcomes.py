@@ -100,7 +100,8 @@ def test_spread_is_measured_at_the_first_and_the_last_step():
   env = SimpleNamespace(reset=lambda key: jnp.zeros(()), step=lambda x, a: x + 1.0 + 0.0 * a.sum())
   mode = lambda params, x, key: jnp.zeros(2)
   # tanh-squashed, the first dimension's mean far out on the tanh: its scale is found before the squash
-  sample = lambda params, x, key: jnp.tanh(jnp.array([2.0, 0.0]) + jax.random.normal(key, (2,)) * jnp.stack([0.5, 0.1 * x]))
+  scale = lambda x: jnp.stack([0.5, 0.1 * x])
+  sample = lambda params, x, key: jnp.tanh(jnp.array([2.0, 0.0]) + jax.random.normal(key, (2,)) * scale(x))
   s = np.asarray(outcomes.spread_program(env, mode, sample, 5)(None, jax.random.split(jax.random.PRNGKey(0), 3)))
   assert s.shape == (3, 2, 2)
   np.testing.assert_allclose(s[:, 0], [[0.5, 0]] * 3, atol=0.07)
