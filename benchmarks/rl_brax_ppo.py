@@ -90,8 +90,8 @@ from brax.training.agents.ppo import networks as ppo_networks  # noqa: E402
 from brax.training.agents.ppo import train as brax_ppo  # noqa: E402
 
 import tasks  # noqa: E402
-from mjx_damage import io, runtime  # noqa: E402
-from mjx_damage.io import write_json, write_text  # noqa: E402
+from mjx_damage import runtime  # noqa: E402
+from mjx_damage.io import read_json, write_json, write_text  # noqa: E402
 from train import checkpoint as ckpt  # noqa: E402
 from train.config import PPOConfig  # noqa: E402
 from train.policy import load_policy  # noqa: E402
@@ -618,7 +618,7 @@ def parse_args(argv=None):
 
 def _load_results(path: str) -> dict:
   """A results file of this script, or ValueError naming ``merge``."""
-  doc = io.read_json(path, "merge")
+  doc = read_json(path, "merge")
   if not isinstance(doc, dict) or "task" not in doc or not isinstance(doc.get("rows"), list):
     raise ValueError(f"merge: {path!r} is not a results file of this script (no task / rows)")
   return doc
