@@ -22,6 +22,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from mjx_damage import io  # noqa: E402
+from mjx_damage.png import save_png  # noqa: E402
 
 
 def parse(argv=None):
@@ -101,7 +102,7 @@ def plot(labels: list, runs: list, path: str, title: str) -> None:
   axes[1].legend(fontsize=7)
   fig.suptitle(title)
   fig.tight_layout()
-  fig.savefig(path, dpi=110)
+  save_png(fig, path, dpi=110)
   plt.close(fig)
 
 

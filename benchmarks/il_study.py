@@ -315,7 +315,7 @@ def plot(path, payload):
   matplotlib.use("Agg")
   import matplotlib.pyplot as plt
 
-  from mjx_damage.io import atomic_path
+  from mjx_damage.png import save_png
 
   rows = payload["tasks"]
   fig, ax = plt.subplots(figsize=(max(6.0, 2.6 * len(rows)), 4.2))
@@ -340,8 +340,7 @@ def plot(path, payload):
   ax.set_title(f"IL with damage-aware data ({payload['config']['policy']}, {payload['device']})", fontsize=9)
   ax.grid(axis="y", alpha=0.3)
   fig.tight_layout()
-  with atomic_path(path, suffix=".png") as tmp:
-    fig.savefig(tmp, dpi=110, format="png")
+  save_png(fig, path, dpi=110)
   plt.close(fig)
 
 

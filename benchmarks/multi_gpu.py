@@ -64,6 +64,7 @@ sys.path.insert(0, ROOT)
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(ROOT, ".jax_cache"))
 
 from mjx_damage import io, runtime  # noqa: E402
+from mjx_damage.png import save_png  # noqa: E402
 from train import distributed  # noqa: E402
 
 ROBOT = "gripper"  # the committed results' robot; tasks.robots.DEFAULT may differ
@@ -284,8 +285,7 @@ def plot(path: str, rows: list) -> None:
       ax.set_title(key)
   axes[0].legend()
   fig.tight_layout()
-  with io.atomic_path(path, suffix=".png") as tmp:
-    fig.savefig(tmp, dpi=110)
+  save_png(fig, path, dpi=110)
   plt.close(fig)
 
 

@@ -36,7 +36,7 @@ import os
 
 import numpy as np
 
-from mjx_damage.io import atomic_path
+from mjx_damage.png import save_png
 from mjx_damage.trajectory import MODELS
 
 LOG_RANGE = 30.0  # a peak this many times the typical value switches an axis to a log scale
@@ -208,12 +208,10 @@ def plot_rollout(traj, out_dir: str, *, env_index: int = 0, title: str = "") -> 
       a.grid(alpha=0.3)
     fig.tight_layout()
     paths[name] = os.path.join(out_dir, f"{name}.png")
-    with atomic_path(paths[name], ".png") as tmp:
-      fig.savefig(tmp, dpi=110)
+    save_png(fig, paths[name], dpi=110)
     plt.close(fig)
   fig = rollout_figure(traj, env_index, title)
   paths["rollout"] = os.path.join(out_dir, "rollout.png")
-  with atomic_path(paths["rollout"], ".png") as tmp:
-    fig.savefig(tmp, dpi=100)
+  save_png(fig, paths["rollout"], dpi=100)
   plt.close(fig)
   return paths

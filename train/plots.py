@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Optional, Sequence
 
-from mjx_damage import io
+from mjx_damage.png import save_png
 
 
 def _series(rows: Sequence[dict], key: str, seed=None):
@@ -58,7 +58,6 @@ def plot_training(rows: Sequence[dict], path: str, title: str = "", budget: Opti
   if title:
     fig.suptitle(title)
   fig.tight_layout()
-  with io.atomic_path(path, suffix=".png") as tmp:
-    fig.savefig(tmp, dpi=110)
+  save_png(fig, path, dpi=110)
   plt.close(fig)
   return path

@@ -5,7 +5,8 @@ from __future__ import annotations
 import json
 import os
 
-from mjx_damage.io import atomic_path, write_json, write_text
+from mjx_damage.io import write_json, write_text
+from mjx_damage.png import save_png
 
 
 def save(result: dict, out: str) -> None:
@@ -217,6 +218,5 @@ def plot(result: dict, path: str) -> None:
     c.set_ylim(min(r["env_steps_per_s"] for r in trk) / 3, max(r["env_steps_per_s"] for r in trk) * 3)
     c.legend(fontsize=8)
   fig.tight_layout()
-  with atomic_path(path, ".png") as tmp:
-    fig.savefig(tmp, dpi=120)
+  save_png(fig, path, dpi=120)
   plt.close(fig)
