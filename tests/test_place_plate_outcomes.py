@@ -64,10 +64,11 @@ def test_classify_tells_placed_let_go_and_never_let_go_apart():
 
 
 def test_a_committed_policy(tmp_path):
-  """A committed Brax policy, 2 episodes by its mode on the counter it was trained on: the file records every
-  episode's outcome and the fractions add up."""
-  argv = ["--policies", POLICY + "#4", "--actions", "mode", "--episodes", "2", "--results-dir", str(tmp_path),
-          "--tag", "t"]
+  """A committed Brax policy, 2 episodes by its mode on the counter it was trained on, with the spread probe: the
+  file records every episode's outcome, the fractions add up, and the sampled action's scale at the first and
+  the last step is one positive number per action dimension."""
+  argv = ["--policies", POLICY + "#4", "--actions", "mode", "--episodes", "2", "--spread",
+          "--results-dir", str(tmp_path), "--tag", "t"]
   assert outcomes.main(argv) == 0
   with open(tmp_path / "place_plate_outcomes_t.json") as f:
     res = json.load(f)
@@ -75,8 +76,12 @@ def test_a_committed_policy(tmp_path):
   assert row["seed"] == 4 and row["action"] == "mode" and len(row["outcome_per_episode"]) == 2
   assert res["task_kwargs"]["counter"] == "box"
   assert sum(row["summary"]["fractions"].values()) == pytest.approx(1.0)
-  assert "| rl_brax_place_plate_box_h200_alone_s4_w2_s4_policy.npz | 4 | mode |" in open(
-      tmp_path / "place_plate_outcomes_t.md").read()
+  md = open(tmp_path / "place_plate_outcomes_t.md").read()
+  assert "| rl_brax_place_plate_box_h200_alone_s4_w2_s4_policy.npz | 4 | mode |" in md
+  first, last = row["summary"]["sampled_spread_first_step"], row["summary"]["sampled_spread_last_step"]
+  assert len(first) == len(last) == 4  # three hand dimensions and the gripper
+  assert all(np.isfinite(v) and 0 < v < 5 for v in first + last), (first, last)
+  assert "| rl_brax_place_plate_box_h200_alone_s4_w2_s4_policy.npz | 4 | " + " / ".join(f"{v:.2f}" for v in first) in md
 
 
 def test_noise_mixture_takes_the_sample_on_the_named_dimensions_only():
