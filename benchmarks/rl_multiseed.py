@@ -402,6 +402,18 @@ def parse(argv):
       if outputs.exists(os.path.join(args.work_dir, name)):
         p.error(f"--work-dir: {os.path.join(args.work_dir, name)} already holds a run; pass --resume to continue "
                 "it, or choose another --work-dir")
+  for flag, v in (("--eval-envs", args.eval_envs), ("--eval-episodes", args.eval_episodes),
+                  ("--eval-every", args.eval_every), ("--paper-timesteps", args.paper_timesteps)):
+    if not (1 <= v < math.inf):
+      p.error(f"{flag}: must be >= 1, got {v}")
+  if not (math.isfinite(args.damage_weight) and args.damage_weight >= 0):
+    p.error(f"--damage-weight: a finite number >= 0, got {args.damage_weight}")
+  if min(args.seeds) < 0:
+    p.error(f"--seeds: integers >= 0, got {args.seeds}")
+  for name in args.methods:  # every method's training config, as train() builds it: sizes and the rest
+    error = config_error(name, args)
+    if error:
+      p.error(f"--methods {name}: {error}")
   if args.deterministic:  # after every check, before main starts a backend: XLA reads its flags once
     try:
       runtime.use_deterministic_gpu_ops("--deterministic")
@@ -413,16 +425,33 @@ def parse(argv):
 device_info = runtime.device_info  # (slug, description) of the first JAX device
 
 
+def config_error(name: str, args) -> str | None:
+  """Why train() would refuse method ``name``'s config (train.config.PPOConfig.validate, e.g. ``num_envs: must
+  be a positive integer``), or None; checked before anything compiles."""
+  from train.config import PPOConfig
+
+  spec = method_spec(name, args)
+  kw = {k: v for k, v in spec.items() if k not in ("label", "preset", "init_from", "init_seed")}
+  kw.update(size_overrides(spec["preset"], args))
+  steps = min(args.timesteps, args.paper_timesteps) if spec["preset"] == "paper" else args.timesteps
+  try:
+    PPOConfig.preset(spec["preset"], seeds=tuple(args.seeds), episode_length=1, num_timesteps=int(steps),
+                     eval_every=int(args.eval_every), num_eval_envs=args.eval_envs, **kw).validate()
+  except (ValueError, TypeError) as e:
+    return str(e)
+  return None
+
+
 def size_overrides(preset: str, args) -> dict:
   """--num-envs / --unroll-length on a preset, keeping its rollouts per iteration and minibatch count."""
   from train.config import PPOConfig
 
   base = PPOConfig.preset(preset)
   out = {}
-  if args.unroll_length:
+  if args.unroll_length is not None:
     out["unroll_length"] = args.unroll_length
-  if args.num_envs:
-    n_mb = min(base.num_minibatches, args.num_envs)
+  if args.num_envs is not None:  # 0 or less: refused by PPOConfig.validate (config_error), not the preset's
+    n_mb = max(1, min(base.num_minibatches, args.num_envs))
     out.update(num_envs=args.num_envs, num_minibatches=n_mb,
                batch_size=max(1, args.num_envs * base.num_rollouts // n_mb))
   return out

@@ -47,6 +47,17 @@ from train.ppo import TrainingDiverged  # noqa: E402
     (["--obs-clip", "0"], "--obs-clip"),
     (["--obs-clip", "-5"], "--obs-clip"),
     (["--obs-clip", "inf"], "--obs-clip"),
+    # sizes: refused here, not by train() after the first method ran (nor 0 taken for the preset's)
+    (["--num-envs", "0"], "--methods task_only: num_envs"),
+    (["--num-envs", "-3"], "--methods task_only: num_envs"),
+    (["--unroll-length", "0"], "--methods task_only: unroll_length"),
+    (["--eval-episodes", "0"], "--eval-episodes"),
+    (["--eval-envs", "0"], "--eval-envs"),
+    (["--eval-every", "0"], "--eval-every"),
+    (["--methods", "paper", "--paper-timesteps", "0"], "--paper-timesteps"),
+    (["--damage-weight", "nan"], "--damage-weight"),
+    (["--damage-weight", "-2"], "--damage-weight"),
+    (["--seeds=-1"], "--seeds"),
 ])
 def test_bad_values_name_the_flag(argv, field, capsys):
   with pytest.raises(SystemExit):
