@@ -41,6 +41,7 @@ def load_benchmark(name: str):
     sys.path.append(BENCHMARKS)
   spec = importlib.util.spec_from_file_location(name, os.path.join(BENCHMARKS, name + ".py"))
   module = importlib.util.module_from_spec(spec)
+  sys.modules[name] = module  # as an import would: dataclasses and pickling look a module up by its name
   spec.loader.exec_module(module)
   return module
 

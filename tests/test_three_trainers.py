@@ -1,0 +1,182 @@
+"""benchmarks/three_trainers.py: the steps of each recipe, bad values refused before any step runs, and the
+orchestration over calls (done steps skipped, the paper's runs continued, --stop-after, a failed step, the
+tables) with a stand-in for the trainers that copies committed results files."""
+
+import json
+import os
+import shutil
+
+import pytest
+from conftest import BENCHMARKS, load_benchmark
+
+three = load_benchmark("three_trainers")
+RESULTS = os.path.join(BENCHMARKS, "results")
+# committed results of the three trainers on Place Plate's box counter, seeds 0-2 (ours, paper) and 0 (Brax)
+COPIES = {
+    "ours_task_only": "rl_place_plate_nvidia_h200_box_stdparam_300s_task_only_s012.json",
+    "ours_penalty": "rl_place_plate_nvidia_h200_box_stdparam_300s_s012.json",
+    "paper_task_only": "rl_place_plate_nvidia_h200_paper_box_epochkl_stdparam_task_only.json",
+    "paper": "rl_place_plate_nvidia_h200_paper_box_epochkl_stdparam_penalty.json",
+    "brax_w0_s0": "rl_brax_place_plate_box_h200_w0_s0.json",
+    "brax_w2_s0": "rl_brax_place_plate_box_h200_alone_s0.json",
+}
+
+
+def _dirs(tmp_path):
+  return ["--results-dir", str(tmp_path / "r"), "--work-dir", str(tmp_path / "w")]
+
+
+def _run(argv, runner=None):
+  def refuse(step, env):
+    raise AssertionError(f"no step should run, {step.name} did")
+  return three.main(argv, slug="gpu_x", runner=runner or refuse)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--task", "drop"], "task: one of place_plate, shelve_item, pick_egg"),
+    (["--seeds", "0,x"], "seeds: comma-separated"),
+    (["--seeds", "1,1"], "seeds: distinct"),
+    (["--trainers", "ours,sac"], "trainers: comma-separated of ours,brax,paper"),
+    (["--task", "shelve_item", "--trainers", "paper"], "no recipe for shelve_item"),
+    (["--stop-after", "-5"], "stop_after"),
+    (["--stop-after", "nan"], "stop_after"),
+    (["--tag", "a/b"], "tag: letters"),
+    (["--ours-args", "--seeds 3"], "ours_args: --seeds are set by this script"),
+    (["--brax-args=--out=x"], "brax_args: --out are set by this script"),
+    (["--paper-args", "'unclosed"], "paper_args: not a shell-quoted list"),
+])
+def test_refuses_bad_values_before_anything_runs(argv, says, tmp_path, capsys):
+  with pytest.raises(SystemExit) as e:
+    _run(argv + _dirs(tmp_path))
+  assert e.value.code == 2 and says in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--parts", "ours,sac"], "parts: 'sac' names no step"),
+    (["--ours-args", "--num-envs -3"], "step ours_task_only: its flags are refused by benchmarks/rl_multiseed.py"),
+    (["--paper-args", "--eval-actions greedy"], "step paper_task_only: its flags are refused"),
+    (["--brax-args", "--num-evals 0"], "step brax_w0_s0: num_evals: must be >= 1"),
+])
+def test_a_step_refused_by_its_script_stops_the_call_before_any_step_runs(argv, says, tmp_path, capsys):
+  assert _run(argv + _dirs(tmp_path)) == 2
+  assert says in capsys.readouterr().err
+  assert not os.path.exists(tmp_path / "r")
+
+
+def test_the_steps_of_each_recipe(tmp_path):
+  """Place Plate: ours (seeds in one program), Brax per seed and weight, the paper's settings; Shelve Item: ours
+  one program per seed, no paper; Pick Egg: Brax's w = 2 starts from its own w = 0 policy of the seed and waits
+  for it. The results files carry the device, the tag and the step; an option of --*-args replaces the recipe's."""
+  def steps(task, *extra):
+    return three.plan(three.parse(["--task", task, *extra] + _dirs(tmp_path)), "gpu_x")
+
+  pp = steps("place_plate", "--ours-args", "--budget-seconds 20")
+  assert [s.name for s in pp] == ["ours_task_only", "ours_penalty", "brax_w0_s0", "brax_w0_s1", "brax_w0_s2",
+                                  "brax_w2_s0", "brax_w2_s1", "brax_w2_s2", "paper_task_only", "paper"]
+  ours = pp[0]
+  assert ours.results.endswith("rl_place_plate_gpu_x_three_trainers_ours_task_only.json")
+  assert ours.budget_s == 20 and three._flag_value(ours.argv, "--budget-seconds") == "20"
+  assert ours.argv.count("--budget-seconds") == 1  # the recipe's value replaced, not repeated
+  assert three._flag_value(ours.argv, "--policy-std") == "parameter" and ours.seeds == [0, 1, 2]
+  assert pp[5].results.endswith("rl_brax_place_plate_gpu_x_three_trainers_brax_w2_s0.json")
+  assert three._flag_value(pp[5].argv, "--damage-weights") == "2" and pp[5].budget_s == 300
+  assert pp[-1].work.endswith("place_plate_three_trainers_paper")
+  assert three._flag_value(pp[-1].argv, "--paper-timesteps") == "25559040"
+
+  si = steps("shelve_item", "--seeds", "4,5")
+  assert [s.name for s in si][:4] == ["ours_task_only_s4", "ours_task_only_s5", "ours_penalty_s4", "ours_penalty_s5"]
+  assert all(s.trainer != "paper" for s in si) and len(si) == 8
+  assert three._flag_value(si[2].argv, "--eval-task-settings") == '{"start":"in_front"}' and si[2].budget_s == 480
+
+  pe = steps("pick_egg", "--trainers", "brax", "--seeds", "1")
+  w0, w2 = pe
+  assert w2.waits_for == w0.results.replace(".json", "_w0_s1_policy.npz")
+  assert three._flag_value(w2.argv, "--init-from") == w2.waits_for
+  assert three._flag_value(w2.argv, "--init-seed") == "1"
+  assert three.update_status(w2).status.startswith("waits for")
+
+
+def _stand_in(log, finish_paper=False, fail=()):
+  """Runs no trainer: writes the step's results file from a committed one (and, for the paper's runs, a work
+  folder to continue); ``finish_paper``: the paper's run reaches its env steps."""
+  def run(step, env):
+    log.append(list(step.argv))
+    if step.name in fail:
+      return 1
+    doc = json.load(open(os.path.join(RESULTS, COPIES[step.name])))
+    if step.work:
+      os.makedirs(os.path.join(three._at(step.work), "m"), exist_ok=True)
+      open(os.path.join(three._at(step.work), "m", "checkpoint.npz"), "w").close()
+      doc["rows"][0]["stopped_by_time_limit"] = not finish_paper
+    os.makedirs(os.path.dirname(three._at(step.results)), exist_ok=True)
+    with open(three._at(step.results), "w") as f:
+      json.dump(doc, f)
+    return 0
+  return run
+
+
+def test_calls_skip_what_is_done_continue_the_paper_and_build_the_table(tmp_path, capsys):
+  argv = ["--trainers", "ours,paper"] + _dirs(tmp_path)
+  log = []
+  # call 1: --stop-after leaves no time for a 300 s step; nothing runs, nothing is written
+  assert _run(argv + ["--stop-after", "200"], _stand_in(log)) == 0
+  assert log == [] and "ours_task_only: not started, it needs about 390 s" in capsys.readouterr().out
+  # call 2: ours' task-only step fails, the rest runs; the paper's runs stop short of their env steps
+  assert _run(argv, _stand_in(log, fail=("ours_task_only",))) == 1
+  assert [a[a.index("--methods") + 1] for a in log] == ["task_only", "penalty", "paper_task_only", "paper"]
+  assert all("--resume" not in a for a in log)
+  out = capsys.readouterr().out
+  assert "steps left: ours_task_only, paper_task_only, paper" in out
+  assert os.path.exists(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md")
+  # call 3: only what is left; the paper's runs continue their work folders, and finish
+  log.clear()
+  assert _run(argv, _stand_in(log, finish_paper=True)) == 0
+  assert [a[a.index("--methods") + 1] for a in log] == ["task_only", "paper_task_only", "paper"]
+  assert ["--resume" in a for a in log] == [False, True, True]
+  assert "steps left: none" in capsys.readouterr().out
+  table = json.load(open(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.json"))
+  md = open(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md").read()
+  assert "paper's PPO settings" in md and "| ours" in md, table.keys()
+  # call 4: all done; a call runs nothing and --plan says so
+  log.clear()
+  assert _run(argv + ["--plan"]) == 0 and "4 steps (4 done)" in capsys.readouterr().out
+
+
+def test_brax_steps_and_a_results_file_of_other_seeds(tmp_path, capsys):
+  argv = ["--trainers", "brax", "--seeds", "0"] + _dirs(tmp_path)
+  log = []
+  assert _run(argv + ["--parts", "brax_w2"], _stand_in(log)) == 0
+  assert len(log) == 1 and three._flag_value(log[0], "--damage-weights") == "2"
+  assert "steps left: brax_w0_s0" in capsys.readouterr().out
+  # a file at a step's name that holds another run is not taken for it, and not replaced
+  src = os.path.join(RESULTS, COPIES["brax_w2_s0"])
+  shutil.copy(src, tmp_path / "r" / "rl_brax_place_plate_gpu_x_three_trainers_brax_w0_s0.json")
+  assert _run(argv) == 2
+  assert "holds seeds [0], not the run of step brax_w0_s0" in capsys.readouterr().err
+
+
+def test_a_paper_run_whose_folder_is_gone_is_not_started_over(tmp_path, capsys):
+  argv = ["--trainers", "paper", "--seeds", "0,1,2"] + _dirs(tmp_path)
+  assert _run(argv + ["--parts", "paper_task_only"], _stand_in([])) == 0
+  shutil.rmtree(tmp_path / "w")
+  assert _run(argv) == 2
+  err = capsys.readouterr().err
+  assert "whose folder" in err and "move the file away" in err
+
+
+@pytest.mark.slow
+def test_a_tiny_benchmark_for_real(tmp_path, capsys):
+  """Every trainer's own script, tiny sizes (learns nothing; ~15 min on 2 cores): six results files, the tables
+  with six groups, and a second call that finds everything done."""
+  argv = ["--seeds", "0", "--tag", "tiny"] + _dirs(tmp_path) + [
+      "--ours-args", "--num-envs 16 --budget-seconds 10 --eval-episodes 16 --eval-envs 16",
+      "--brax-args", "--num-envs 16 --batch-size 16 --num-minibatches 4 --num-timesteps 2000 --num-evals 2 "
+                     "--eval-episodes 16 --curve-episodes 0",
+      "--paper-args", "--num-envs 8 --unroll-length 16 --paper-timesteps 1024 --eval-episodes 16 --eval-envs 16"]
+  assert three.main(argv) == 0
+  assert "steps left: none" in capsys.readouterr().out
+  table = json.load(open(tmp_path / "r" / "trainer_table_place_plate_tiny_mode.json"))
+  assert len(table["sources"]) == 6 and sum(len(g["runs"]) for g in table["groups"]) == 6
+  assert {(g["trainer"].split(" (")[0], g["reward"]) for g in table["groups"]} == {
+      (t, r) for t in ("ours", "Brax PPO", "paper's PPO settings") for r in ("task reward only", "damage penalty, w = 2")}
+  assert three.main(argv) == 0 and "6 steps (6 done)" in capsys.readouterr().out
