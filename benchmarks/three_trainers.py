@@ -18,8 +18,8 @@ bars, the command of every run) from every step's results so far.
 A step whose results file exists is done and skipped: the benchmark spreads over as many calls as it needs
 (a time-limited GPU machine: ``--stop-after``), and nothing written is ever replaced. The paper's runs, longer
 than a call, live in ``--work-dir`` and continue (``--resume``) until their env steps are done; the tables are
-rebuilt at the end of every call. Flags given to the driver are checked before any step starts; each step's
-own flags by its script before it compiles.
+rebuilt at the end of every call. The driver's flags, and every step's (by its own script's parser), are
+checked before any step starts.
 
 Usage (one H100 or H200; ``--plan`` prints every step, its status and its command, and runs nothing)::
 
@@ -38,6 +38,7 @@ Two GPUs: two drivers, each with its own ``--parts`` (step names or their prefix
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shlex
@@ -225,7 +226,7 @@ def plan(args, slug: str) -> list[Step]:
         steps.append(Step(name, "brax", "rl_brax_ppo.py", argv, stem + ".json", budget_, [s], waits_for=waits))
   if "paper" in args.trainers:
     for method, (flags, budget) in r.paper.items():
-      name = method
+      name = "paper_penalty" if method == "paper" else method  # a prefix of no other step: --parts picks it alone
       work = os.path.join(_rel(args.work_dir), f"{task}_{tag}_{name}")
       flags_, budget_ = _with(budget, flags, args.paper_extra)
       argv = ["--task", task, *r.settings, "--methods", method, *flags_, "--seeds", seeds, "--work-dir", work,
@@ -350,11 +351,7 @@ def select(steps: list[Step], parts) -> list[Step]:
 def check_step(step: Step) -> None:
   """The step's own script parses its flags (the recipe's, the --*-args, the task settings): ``ValueError``
   naming the step before anything is trained. Runs in this process on the CPU (main keeps JAX off the GPU)."""
-  import importlib
-
-  if HERE not in sys.path:
-    sys.path.append(HERE)
-  module = importlib.import_module(step.script[:-3])
+  module = _script(step.script[:-3])
   check = module.parse if step.trainer != "brax" else module.parse_args
   argv = [a for a in step.argv if a != "--resume"] if step.work else step.argv
   if step.work:  # the paper's work dir may hold the run a --resume continues; parse without both
@@ -382,19 +379,28 @@ def run_step(step: Step, env: dict) -> int:
   return subprocess.run([sys.executable, os.path.join(HERE, step.script), *step.argv], env=env, cwd=ROOT).returncode
 
 
-def build_tables(args, steps: list[Step], env: dict) -> list[str]:
-  """``trainer_table.py`` by mode and by sample over every results file of ``steps`` there is; their stems."""
+def _script(name: str):
+  """``benchmarks/<name>.py`` as a module (its sibling imports resolve as when it runs as a script)."""
+  import importlib
+
+  if HERE not in sys.path:
+    sys.path.append(HERE)
+  return importlib.import_module(name)
+
+
+def build_tables(args, steps: list[Step]) -> list[str]:
+  """``trainer_table.py`` by mode and by sample over every results file of ``steps`` there is (in this process:
+  it reads JSON, no JAX); their stems."""
   sources = sorted({s.results for s in steps if os.path.exists(_at(s.results))})
   stems = []
   if not sources:
     return stems
-  for action in ("mode", "sample"):
-    stem = os.path.join(_rel(args.results_dir), f"trainer_table_{args.task}_{args.tag}_{action}")
-    rc = subprocess.run([sys.executable, os.path.join(HERE, "trainer_table.py"), "--task", args.task, "--action",
-                         action, "--sources", *sources, "--out", stem], env=env, cwd=ROOT).returncode
-    if rc != 0:
-      raise RuntimeError(f"trainer_table.py --action {action} failed (exit {rc})")
-    stems.append(stem)
+  table = _script("trainer_table")
+  with contextlib.chdir(ROOT):  # the table records its command with the paths the steps wrote
+    for action in ("mode", "sample"):
+      stem = os.path.join(_rel(args.results_dir), f"trainer_table_{args.task}_{args.tag}_{action}")
+      table.main(["--task", args.task, "--action", action, "--sources", *sources, "--out", stem])
+      stems.append(stem)
   return stems
 
 
@@ -446,7 +452,7 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
   except ValueError as e:
     print(f"three_trainers.py: error: {e}", file=sys.stderr)
     return 2
-  stems = build_tables(args, steps, child_env)
+  stems = build_tables(args, steps)
   left = [s.name for s in (update_status(s) for s in steps) if s.status != "done"]
   print(f"tables: {', '.join(x + '.md' for x in stems) or 'none yet (no step done)'}; "
         f"steps left: {', '.join(left) or 'none'}")

@@ -16,7 +16,7 @@ COPIES = {
     "ours_task_only": "rl_place_plate_nvidia_h200_box_stdparam_300s_task_only_s012.json",
     "ours_penalty": "rl_place_plate_nvidia_h200_box_stdparam_300s_s012.json",
     "paper_task_only": "rl_place_plate_nvidia_h200_paper_box_epochkl_stdparam_task_only.json",
-    "paper": "rl_place_plate_nvidia_h200_paper_box_epochkl_stdparam_penalty.json",
+    "paper_penalty": "rl_place_plate_nvidia_h200_paper_box_epochkl_stdparam_penalty.json",
     "brax_w0_s0": "rl_brax_place_plate_box_h200_w0_s0.json",
     "brax_w2_s0": "rl_brax_place_plate_box_h200_alone_s0.json",
 }
@@ -72,7 +72,7 @@ def test_the_steps_of_each_recipe(tmp_path):
 
   pp = steps("place_plate", "--ours-args", "--budget-seconds 20")
   assert [s.name for s in pp] == ["ours_task_only", "ours_penalty", "brax_w0_s0", "brax_w0_s1", "brax_w0_s2",
-                                  "brax_w2_s0", "brax_w2_s1", "brax_w2_s2", "paper_task_only", "paper"]
+                                  "brax_w2_s0", "brax_w2_s1", "brax_w2_s2", "paper_task_only", "paper_penalty"]
   ours = pp[0]
   assert ours.results.endswith("rl_place_plate_gpu_x_three_trainers_ours_task_only.json")
   assert ours.budget_s == 20 and three._flag_value(ours.argv, "--budget-seconds") == "20"
@@ -80,8 +80,10 @@ def test_the_steps_of_each_recipe(tmp_path):
   assert three._flag_value(ours.argv, "--policy-std") == "parameter" and ours.seeds == [0, 1, 2]
   assert pp[5].results.endswith("rl_brax_place_plate_gpu_x_three_trainers_brax_w2_s0.json")
   assert three._flag_value(pp[5].argv, "--damage-weights") == "2" and pp[5].budget_s == 300
-  assert pp[-1].work.endswith("place_plate_three_trainers_paper")
+  assert pp[-1].work.endswith("place_plate_three_trainers_paper_penalty")
   assert three._flag_value(pp[-1].argv, "--paper-timesteps") == "25559040"
+  assert [s.name for s in three.select(pp, ["paper_penalty", "brax_w0_s1"])] == ["brax_w0_s1", "paper_penalty"]
+  assert [s.name for s in three.select(pp, ["paper"])] == ["paper_task_only", "paper_penalty"]
 
   si = steps("shelve_item", "--seeds", "4,5")
   assert [s.name for s in si][:4] == ["ours_task_only_s4", "ours_task_only_s5", "ours_penalty_s4", "ours_penalty_s5"]
@@ -126,7 +128,7 @@ def test_calls_skip_what_is_done_continue_the_paper_and_build_the_table(tmp_path
   assert [a[a.index("--methods") + 1] for a in log] == ["task_only", "penalty", "paper_task_only", "paper"]
   assert all("--resume" not in a for a in log)
   out = capsys.readouterr().out
-  assert "steps left: ours_task_only, paper_task_only, paper" in out
+  assert "steps left: ours_task_only, paper_task_only, paper_penalty" in out
   assert os.path.exists(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md")
   # call 3: only what is left; the paper's runs continue their work folders, and finish
   log.clear()
