@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import os
 import shlex
 import subprocess
@@ -48,6 +47,10 @@ import time
 from dataclasses import dataclass, field
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from mjx_damage import io, outputs  # noqa: E402
+
 HERE = os.path.join(ROOT, "benchmarks")
 RESULTS = os.path.join(HERE, "results")
 TRAINERS = ("ours", "brax", "paper")
@@ -236,19 +239,11 @@ def plan(args, slug: str) -> list[Step]:
   return steps
 
 
-def _read(path: str) -> dict:
-  try:
-    with open(path) as f:
-      return json.load(f)
-  except (OSError, ValueError) as e:
-    raise ValueError(f"results: {path} cannot be read ({e}); move it away to run its step again") from None
-
-
 def update_status(step: Step) -> Step:
   """``step.status``: done, partly done (a paper run to continue), waits (for another step's file) or to run.
   A results file of other seeds than the step's is refused (``ValueError``): choose another ``--tag``."""
   if os.path.exists(_at(step.results)):
-    doc = _read(_at(step.results))
+    doc = io.read_json(_at(step.results), "results")
     if step.trainer == "brax":
       have = sorted({r["seed"] for r in doc.get("rows", [])})
       weight = float(_flag_value(step.argv, "--damage-weights"))
@@ -264,11 +259,11 @@ def update_status(step: Step) -> Step:
     if step.trainer != "paper" or not rows[0].get("stopped_by_time_limit"):
       step.status = "done"
       return step
-    if not _holds_run(step.work):  # started over, the run would replace the file of its earlier calls
+    if not _holds_run(step):  # started over, the run would replace the file of its earlier calls
       raise ValueError(f"results: {step.results} is a run stopped at {rows[0].get('env_steps_per_seed')} env steps "
                        f"per seed whose folder {step.work} is gone (or give the --work-dir it ran in); move the "
                        "file away to start the step over")
-  if step.work is not None and _holds_run(step.work):
+  if step.work is not None and _holds_run(step):
     step.status = "partly done"
     if "--resume" not in step.argv:
       step.argv.append("--resume")
@@ -277,11 +272,9 @@ def update_status(step: Step) -> Step:
   return step
 
 
-def _holds_run(work: str) -> bool:
-  """A paper run to continue: ``work`` (its --work-dir) has a method folder with something in it."""
-  work = _at(work)
-  return os.path.isdir(work) and any(os.listdir(os.path.join(work, d)) for d in os.listdir(work)
-                                     if os.path.isdir(os.path.join(work, d)))
+def _holds_run(step: Step) -> bool:
+  """A paper run to continue: its method's folder in its --work-dir holds something (as rl_multiseed checks)."""
+  return outputs.exists(_at(os.path.join(step.work, _flag_value(step.argv, "--methods"))))
 
 
 def command(step: Step) -> str:
@@ -410,6 +403,7 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
   child_env = dict(os.environ) if child_env is None else child_env
   args = parse(argv)
   t0 = time.monotonic()
+  checked = set()  # steps whose flags their script's parser has taken
   try:
     slug = slug or device_slug(child_env)
     steps = [update_status(s) for s in plan(args, slug)]
@@ -417,6 +411,7 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
     for s in chosen:
       if s.status in ("to run", "partly done"):
         check_step(s)
+        checked.add(s.name)
   except ValueError as e:
     print(f"three_trainers.py: error: {e}", file=sys.stderr)
     return 2
@@ -440,7 +435,8 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
         print(f"{s.name}: not started, it needs about {s.budget_s + OVERHEAD_S:.0f} s and "
               f"{args.stop_after - (time.monotonic() - t0):.0f} s of --stop-after are left", flush=True)
         continue
-      check_step(s)  # a step that waited: its input exists now
+      if s.name not in checked:  # a step that waited: its input exists now
+        check_step(s)
       print(f"== {s.name} ({time.monotonic() - t0:.0f} s): {command(s)}", flush=True)
       rc = runner(s, child_env)
       if rc != 0:

@@ -107,8 +107,9 @@ def _stand_in(log, finish_paper=False, fail=()):
       return 1
     doc = json.load(open(os.path.join(RESULTS, COPIES[step.name])))
     if step.work:
-      os.makedirs(os.path.join(three._at(step.work), "m"), exist_ok=True)
-      open(os.path.join(three._at(step.work), "m", "checkpoint.npz"), "w").close()
+      run = os.path.join(three._at(step.work), three._flag_value(step.argv, "--methods"))  # rl_multiseed's folder
+      os.makedirs(run, exist_ok=True)
+      open(os.path.join(run, "checkpoint.npz"), "w").close()
       doc["rows"][0]["stopped_by_time_limit"] = not finish_paper
     os.makedirs(os.path.dirname(three._at(step.results)), exist_ok=True)
     with open(three._at(step.results), "w") as f:
