@@ -54,9 +54,10 @@ from mjx_damage import io, outputs  # noqa: E402
 HERE = os.path.join(ROOT, "benchmarks")
 RESULTS = os.path.join(HERE, "results")
 TRAINERS = ("ours", "brax", "paper")
-# Seconds a step takes beyond its training budget: compiling before the clock of a budget starts (Brax), the
-# final evaluation on 1024 episodes by two actions, writing (H200: 40–80 s); --stop-after counts them.
-OVERHEAD_S = 90.0
+# Seconds a step takes beyond its training budget, by trainer: starting the script, the final evaluation on
+# 1024 episodes by two actions, writing; --stop-after counts them. Measured by this driver on an H200 (Shelve
+# Item, "== step: ... after N s"): ours 35-60 s over a 300 s budget, Brax's 127 s over 400 s.
+OVERHEAD_S = {"ours": 75.0, "brax": 150.0, "paper": 90.0}
 
 
 @dataclass(frozen=True)
@@ -297,8 +298,13 @@ def parse(argv=None):
                  help="the paper's runs, continued over calls")
   p.add_argument("--stop-after", type=float, default=None, metavar="SECONDS",
                  help="start no step that would end later than this many seconds after the start (its budget "
-                      f"+ {OVERHEAD_S:.0f} s); for a time-limited machine")
+                      f"+ {', '.join(f'{v:.0f} s ({k})' for k, v in OVERHEAD_S.items())}); for a time-limited machine")
   p.add_argument("--plan", action="store_true", help="print every step, its status and command; run nothing")
+  p.add_argument("--tables", action="store_true",
+                 help="rebuild the tables from the results there are; run nothing")
+  p.add_argument("--device", default=None, metavar="SLUG",
+                 help="the device whose results to read (their file names: nvidia_h100, nvidia_h200, cpu, ...), "
+                      "with --plan or --tables; default the device the steps would run on")
   for t in TRAINERS:
     p.add_argument(f"--{t}-args", default=None, metavar="FLAGS",
                    help=f"flags of every {t} step's command over the recipe's (one replaces the recipe's of its name); "
@@ -323,6 +329,12 @@ def parse(argv=None):
       raise ValueError(f"stop_after: seconds > 0, got {a.stop_after}")
     if not a.tag or any(not (c.isalnum() or c in "_-") for c in a.tag):
       raise ValueError(f"tag: letters, digits, '_' or '-', got {a.tag!r}")
+    if a.device is not None:
+      if not a.device or any(not (c.isalnum() or c == "_") for c in a.device):
+        raise ValueError(f"device: a results-file slug of letters, digits and '_' (nvidia_h100), got {a.device!r}")
+      if not (a.plan or a.tables):
+        raise ValueError("device: only with --plan or --tables (steps run on this machine's device and name "
+                         "their files after it)")
     a.ours_extra = _extra(a.ours_args, "ours_args")
     a.brax_extra = _extra(a.brax_args, "brax_args")
     a.paper_extra = _extra(a.paper_args, "paper_args")
@@ -405,10 +417,10 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
   t0 = time.monotonic()
   checked = set()  # steps whose flags their script's parser has taken
   try:
-    slug = slug or device_slug(child_env)
+    slug = args.device or slug or device_slug(child_env)
     steps = [update_status(s) for s in plan(args, slug)]
     chosen = select(steps, args.parts)
-    for s in chosen:
+    for s in chosen if not (args.plan or args.tables) else []:
       if s.status in ("to run", "partly done"):
         check_step(s)
         checked.add(s.name)
@@ -424,21 +436,25 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
     return 0
   failed = []
   try:
-    for s in chosen:
+    for s in chosen if not args.tables else []:
       update_status(s)
       if s.status == "done":
         continue
       if s.status.startswith("waits"):
         print(f"{s.name}: {s.status}; not run", flush=True)
         continue
-      if args.stop_after is not None and time.monotonic() - t0 + s.budget_s + OVERHEAD_S > args.stop_after:
-        print(f"{s.name}: not started, it needs about {s.budget_s + OVERHEAD_S:.0f} s and "
+      needs = s.budget_s + OVERHEAD_S[s.trainer]
+      if args.stop_after is not None and time.monotonic() - t0 + needs > args.stop_after:
+        print(f"{s.name}: not started, it needs about {needs:.0f} s and "
               f"{args.stop_after - (time.monotonic() - t0):.0f} s of --stop-after are left", flush=True)
         continue
       if s.name not in checked:  # a step that waited: its input exists now
         check_step(s)
-      print(f"== {s.name} ({time.monotonic() - t0:.0f} s): {command(s)}", flush=True)
+      start = time.monotonic()
+      print(f"== {s.name} ({start - t0:.0f} s): {command(s)}", flush=True)
       rc = runner(s, child_env)
+      print(f"== {s.name}: exit status {rc} after {time.monotonic() - start:.0f} s "
+            f"(budget {s.budget_s:g} s)", flush=True)
       if rc != 0:
         print(f"{s.name}: exit status {rc}; the next call runs it again", file=sys.stderr, flush=True)
         failed.append(s.name)
@@ -455,7 +471,17 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
   return 1 if failed else 0
 
 
+def keep_jax_on_cpu() -> None:
+  """Pin this process's JAX to the CPU: it only parses the steps' flags (``check_step``) and reads JSON, and a
+  GPU backend here would take 75 % of the GPU's memory from the steps, its children. The environment variable
+  ``JAX_PLATFORMS`` is read when JAX is imported (``mjx_damage`` imports it above), so the config is set
+  instead; it holds as long as no backend has started."""
+  import jax
+
+  jax.config.update("jax_platforms", "cpu")
+
+
 if __name__ == "__main__":
-  steps_env = dict(os.environ)
-  os.environ["JAX_PLATFORMS"] = "cpu"  # this process only checks flags (check_step); the steps get the GPU
+  steps_env = dict(os.environ)  # the steps' own: the GPU where there is one
+  keep_jax_on_cpu()
   sys.exit(main(child_env=steps_env))

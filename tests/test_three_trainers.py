@@ -5,6 +5,8 @@ tables) with a stand-in for the trainers that copies committed results files."""
 import json
 import os
 import shutil
+import subprocess
+import sys
 
 import pytest
 from conftest import BENCHMARKS, load_benchmark
@@ -41,6 +43,8 @@ def _run(argv, runner=None):
     (["--stop-after", "-5"], "stop_after"),
     (["--stop-after", "nan"], "stop_after"),
     (["--tag", "a/b"], "tag: letters"),
+    (["--device", "nvidia h100", "--plan"], "device: a results-file slug"),
+    (["--device", "nvidia_h100"], "device: only with --plan or --tables"),
     (["--ours-args", "--seeds 3"], "ours_args: --seeds are set by this script"),
     (["--brax-args=--out=x"], "brax_args: --out are set by this script"),
     (["--paper-args", "'unclosed"], "paper_args: not a shell-quoted list"),
@@ -123,7 +127,7 @@ def test_calls_skip_what_is_done_continue_the_paper_and_build_the_table(tmp_path
   log = []
   # call 1: --stop-after leaves no time for a 300 s step; nothing runs, nothing is written
   assert _run(argv + ["--stop-after", "200"], _stand_in(log)) == 0
-  assert log == [] and "ours_task_only: not started, it needs about 390 s" in capsys.readouterr().out
+  assert log == [] and "ours_task_only: not started, it needs about 375 s" in capsys.readouterr().out
   # call 2: ours' task-only step fails, the rest runs; the paper's runs stop short of their env steps
   assert _run(argv, _stand_in(log, fail=("ours_task_only",))) == 1
   assert [a[a.index("--methods") + 1] for a in log] == ["task_only", "penalty", "paper_task_only", "paper"]
@@ -165,6 +169,50 @@ def test_a_paper_run_whose_folder_is_gone_is_not_started_over(tmp_path, capsys):
   assert _run(argv) == 2
   err = capsys.readouterr().err
   assert "whose folder" in err and "move the file away" in err
+
+
+def test_stop_after_counts_each_trainers_overhead(tmp_path, capsys):
+  """Shelve Item: ours' w = 2 step (480 s + 75 s) does not fit 552 s; Brax's (400 s + 150 s) does."""
+  started = []
+  argv = ["--task", "shelve_item", "--seeds", "0", "--stop-after", "552"] + _dirs(tmp_path)
+  assert _run(argv, lambda step, env: started.append(step.name) or 1) == 1  # the stand-in fails every step
+  assert started == ["ours_task_only_s0", "brax_w0_s0", "brax_w2_s0"]
+  out = capsys.readouterr().out
+  assert "ours_penalty_s0: not started, it needs about 555 s" in out
+  assert "== brax_w0_s0: exit status 1 after 0 s (budget 400 s)" in out
+
+
+def test_tables_of_a_benchmark_run_on_another_device(tmp_path, capsys):
+  """--device names the results of a benchmark run elsewhere (a GPU): --plan shows their status and --tables
+  rebuilds the tables from them here, running nothing."""
+  argv = ["--trainers", "ours", "--seeds", "0,1,2"] + _dirs(tmp_path)
+  assert _run(argv, _stand_in([])) == 0  # made on "gpu_x"
+  os.remove(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md")
+
+  def here(*extra):
+    return three.main(argv + list(extra), slug="cpu", runner=lambda step, env: pytest.fail(f"{step.name} ran"))
+
+  assert here("--plan") == 0 and "device cpu: 2 steps (0 done)" in capsys.readouterr().out
+  assert here("--plan", "--device", "gpu_x") == 0 and "device gpu_x: 2 steps (2 done)" in capsys.readouterr().out
+  assert here("--tables", "--device", "gpu_x") == 0
+  md = open(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md").read()
+  assert "rl_place_plate_gpu_x_three_trainers_ours_penalty.json" in md
+  assert here("--tables") == 0 and "steps left: ours_task_only, ours_penalty" in capsys.readouterr().out
+
+
+def test_the_driver_keeps_jax_off_the_gpu(tmp_path):
+  """The driver runs as a script with JAX already imported (by mjx_damage): setting JAX_PLATFORMS then is too
+  late, so it pins JAX's config to the CPU; without that, on a GPU machine it took 75 % of the GPU's memory
+  from the steps."""
+  code = ("import runpy, sys, jax\n"
+          "sys.argv = ['three_trainers.py', '--task', 'shelve_item', '--plan', '--results-dir', sys.argv[1]]\n"
+          "try:\n  runpy.run_path(%r, run_name='__main__')\n"
+          "except SystemExit as e:\n  assert e.code == 0, e.code\n"
+          "print('platforms', jax.config.jax_platforms)\n") % os.path.join(BENCHMARKS, "three_trainers.py")
+  env = {k: v for k, v in os.environ.items() if k != "JAX_PLATFORMS"}
+  out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], env=env, capture_output=True, text=True)
+  assert out.returncode == 0, out.stderr
+  assert out.stdout.strip().splitlines()[-1] == "platforms cpu"
 
 
 @pytest.mark.slow
