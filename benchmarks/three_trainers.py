@@ -25,6 +25,9 @@ Usage (one H100 or H200; ``--plan`` prints every step, its status and its comman
 
     python benchmarks/three_trainers.py --task place_plate --seeds 0,1,2 --stop-after 560 --tag h100   # call 1, 2, …
 
+Its results copied back to another machine, ``--device nvidia_h100`` (the slug in their names) with ``--plan``
+or ``--tables`` shows their status or rebuilds the tables there, running nothing.
+
 Two GPUs: two drivers, each with its own ``--parts`` (step names or their prefixes: ``ours``, ``brax_w2``,
 ``paper_task_only``) and ``CUDA_VISIBLE_DEVICES``. A CPU check of the plumbing (learns nothing)::
 
