@@ -229,10 +229,24 @@ def report_md(res: dict) -> str:
   return "\n".join(lines) + "\n"
 
 
+def _workers(argv: list[str]) -> int:
+  """``--workers`` of ``argv`` before the parser runs (1 when absent or not a number: the parser says so)."""
+  pre = argparse.ArgumentParser(add_help=False, exit_on_error=False)
+  pre.add_argument("--workers", default="1")
+  try:
+    return int(pre.parse_known_args(argv)[0].workers)
+  except (ValueError, argparse.ArgumentError):
+    return 1
+
+
 def main(argv=None) -> int:
+  if _workers(sys.argv[1:] if argv is None else argv) > 1:
+    # the workers get the GPU and this process only merges their files: a GPU client started here with
+    # JAX's default preallocation would hold 75 % of the GPU's memory from them for the whole run
+    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                               formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-  gpu = jax.default_backend() != "cpu"
+  gpu = jax.default_backend() != "cpu"  # starts this process's backend: after the line above
   p.add_argument("--tasks", default=None,
                  help="comma-separated task names (default: every task the robot supports)")
   p.add_argument("--robot", default=ROBOT,

@@ -126,3 +126,24 @@ def test_soak_keeps_the_gripper_and_its_file_names(monkeypatch):
     soak.main(["--tasks", "place_plate", "--out", "unused.json"])
   assert soak.default_out("cpu", "gripper").endswith("soak_cpu.json")
   assert soak.default_out("cpu", "panda").endswith("soak_panda_cpu.json")
+
+
+@pytest.mark.parametrize("argv, preallocate", [(["--workers", "3"], "false"), (["--workers=2"], "false"),
+                                                (["--workers", "1"], None), ([], None), (["--workers"], None)])
+def test_a_soak_with_workers_leaves_the_gpu_memory_to_them(argv, preallocate, monkeypatch):
+  """With --workers > 1 this process only merges files: its backend starts without preallocating (JAX's
+  default takes 75 % of a GPU's memory), so the workers get the GPU. Checked at the moment the backend starts."""
+  monkeypatch.delenv("XLA_PYTHON_CLIENT_PREALLOCATE", raising=False)
+  seen = []
+
+  class Stop(Exception):
+    pass
+
+  def backend():
+    seen.append(soak.os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE"))
+    raise Stop
+
+  monkeypatch.setattr(soak.jax, "default_backend", backend)
+  with pytest.raises(Stop):
+    soak.main(argv)
+  assert seen == [preallocate]
