@@ -246,6 +246,7 @@ def plan(args, slug: str) -> list[Step]:
 def update_status(step: Step) -> Step:
   """``step.status``: done, partly done (a paper run to continue), waits (for another step's file) or to run.
   A results file of other seeds than the step's is refused (``ValueError``): choose another ``--tag``."""
+  step.status = "to run"  # asked again during a call: a step that waited may run now
   if os.path.exists(_at(step.results)):
     doc = io.read_json(_at(step.results), "results")
     if step.trainer == "brax":

@@ -162,6 +162,29 @@ def test_brax_steps_and_a_results_file_of_other_seeds(tmp_path, capsys):
   assert "holds seeds [0], not the run of step brax_w0_s0" in capsys.readouterr().err
 
 
+def test_brax_w2_runs_in_the_call_that_made_the_w0_policy_it_waits_for(tmp_path, capsys):
+  """Pick Egg: Brax's w = 2 step starts from the w = 0 step's exported policy; one call runs both, in order
+  (the w = 2 step's flags, its --init-from file included, checked once that file exists)."""
+  log = []
+  made = {"brax_w0_s1": "rl_brax_pick_egg_held_std0_clip_obsclip_w0_430s_s1",  # committed runs of seed 1
+          "brax_w2_s1": "rl_brax_pick_egg_from_own_carry_w2_own_s1"}
+
+  def run(step, env):  # as rl_brax_ppo.py --export-policy: the results and the policy beside them
+    log.append(list(step.argv))
+    shutil.copy(os.path.join(RESULTS, made[step.name] + ".json"), three._at(step.results))
+    w = three._flag_value(step.argv, "--damage-weights")
+    shutil.copy(os.path.join(RESULTS, f"{made['brax_w0_s1']}_w0_s1_policy.npz"),
+                three._at(step.results).replace(".json", f"_w{w}_s1_policy.npz"))
+    return 0
+
+  argv = ["--task", "pick_egg", "--trainers", "brax", "--seeds", "1"] + _dirs(tmp_path)
+  os.makedirs(tmp_path / "r")
+  assert _run(argv, run) == 0
+  assert [three._flag_value(a, "--damage-weights") for a in log] == ["0", "2"]
+  assert three._flag_value(log[1], "--init-from").endswith("rl_brax_pick_egg_gpu_x_three_trainers_brax_w0_s1_w0_s1_policy.npz")
+  assert "steps left: none" in capsys.readouterr().out
+
+
 def test_a_paper_run_whose_folder_is_gone_is_not_started_over(tmp_path, capsys):
   argv = ["--trainers", "paper", "--seeds", "0,1,2"] + _dirs(tmp_path)
   assert _run(argv + ["--parts", "paper_task_only"], _stand_in([])) == 0
