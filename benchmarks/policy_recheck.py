@@ -11,6 +11,12 @@ and run on the checkpoints' settings when those agree (``--task-arg`` adds to th
 Policies are the CLI's specs (``mjx-damage eval --policy``): ``checkpoint[+sample|+mean]:FILE#SEED``,
 ``scripted:safe``, ``scripted:unsafe``, ``zero``, ``random``.
 
+``--policy-precision float32,tf32`` scores each checkpoint policy also with its network's matrix products at
+TF32 precision (what JAX computes float32 products at by default on recent NVIDIA GPUs: the inputs and weights
+of every dense layer rounded to a 10-bit mantissa, sums in float32), emulated here with
+``jax.lax.reduce_precision``; the physics keeps its own precision. A GPU-trained policy that scores differently
+here can so be told apart from one whose own arithmetic is the difference.
+
 Rows of one checkpoint file, action and backend share one compiled evaluator (the weights are its data), so
 re-scoring several seeds of a run compiles once per action and backend.
 
@@ -39,7 +45,35 @@ import provenance  # noqa: E402  (the sibling module: the results writer)
 from apps import resolve as R  # noqa: E402
 from train import evaluate as E  # noqa: E402
 
+import flax.linen as nn  # noqa: E402
+import jax  # noqa: E402
+
 BACKENDS = ("mjx", "native")
+PRECISIONS = ("float32", "tf32")
+
+
+def _tf32(x):
+  """``x`` rounded to TensorFloat-32 (float32's 8-bit exponent, a 10-bit mantissa), kept as float32."""
+  return jax.lax.reduce_precision(x, exponent_bits=8, mantissa_bits=10)
+
+
+def _tf32_dense(next_fun, args, kwargs, context):
+  """A flax method interceptor: the input of every ``nn.Dense`` rounded to TF32 before its product."""
+  if isinstance(context.module, nn.Dense) and context.method_name == "__call__":
+    args = (_tf32(args[0]), *args[1:])
+  return next_fun(*args, **kwargs)
+
+
+def tf32_policy(policy: E.Policy) -> E.Policy:
+  """``policy`` (a checkpoint's: ``policy.apply``, ``policy.params``) with its network's matrix products at
+  TF32 precision: every kernel and every dense layer's input rounded (the normaliser and biases untouched)."""
+  def apply(params, state, rng):
+    with nn.intercept_methods(_tf32_dense):
+      return policy.apply(params, state, rng)
+
+  kernels = jax.tree_util.tree_map_with_path(
+      lambda path, x: _tf32(x) if any(getattr(k, "key", None) == "kernel" for k in path) else x, policy.params)
+  return E.parametrized_policy(apply, kernels)
 
 
 def parse(argv=None):
@@ -56,6 +90,9 @@ def parse(argv=None):
   p.add_argument("--task-arg", action="append", default=[], metavar="KEY=JSON",
                  help="task keyword over every policy's settings (a checkpoint brings its own; this one "
                       "overrides them, e.g. counter=\"box\" to score Place Plate policies on the box counter)")
+  p.add_argument("--policy-precision", default="float32",
+                 help=f"comma-separated of {','.join(PRECISIONS)}, each a row: the checkpoint policies' matrix "
+                      "products in full float32, or at TF32 precision as on a recent NVIDIA GPU (emulated)")
   p.add_argument("--tag", default="")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   args = p.parse_args(argv)
@@ -77,6 +114,15 @@ def parse(argv=None):
       raise ValueError(f"fragility: comma-separated numbers, got {fragility_text!r}") from None
     if not args.fragility:
       raise ValueError("fragility: give at least one factor")
+    args.policy_precision = [v.strip() for v in args.policy_precision.split(",") if v.strip()]
+    if (not args.policy_precision or len(set(args.policy_precision)) != len(args.policy_precision)
+            or any(v not in PRECISIONS for v in args.policy_precision)):
+      raise ValueError(f"policy_precision: comma-separated of {', '.join(PRECISIONS)}, each at most once, "
+                       f"got {','.join(args.policy_precision)!r}")
+    if "tf32" in args.policy_precision:
+      other = [s for s in args.policies if R.parse_policy_spec(s)[0] != "checkpoint"]
+      if other:
+        raise ValueError(f"policy_precision: tf32 rounds a checkpoint policy's network; {', '.join(other)} has none")
     for f in args.fragility:
       E.check_args(args.episodes, f, 95.0, seed=args.seed)
     trained = {s: R.policy_task_kwargs(s, args.task) for s in args.policies  # reads every checkpoint
@@ -95,20 +141,24 @@ def parse(argv=None):
 
 
 def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: int, seed: int,
-            shared: dict | None = None, fragility: float = 1.0) -> dict:
+            shared: dict | None = None, fragility: float = 1.0, precision: str = "float32") -> dict:
   """``spec`` on ``env`` (``task`` made with ``overrides``) over ``episodes`` episodes of ``backend``:
   E.evaluate's metrics.
 
   ``shared``: evaluators kept between calls, one per (checkpoint and action, or scripted spec; settings;
-  backend): the seeds of one checkpoint differ only in their weights and the levels of ``fragility`` are an
+  backend, precision): the seeds of one checkpoint differ only in their weights and the levels of ``fragility`` are an
   argument, both data of the evaluator, so one compiled program scores them all (the numbers are those of a fresh evaluator: the same program, the same inputs).
+  ``precision``: "tf32" scores the policy with :func:`tf32_policy`.
   """
   policy = R.make_policy(spec, env)
+  if precision == "tf32":
+    policy = tf32_policy(policy)
   T = R.episode_length_of(env, task)
   key = None
   if shared is not None:  # a scripted policy is kept too: its levels of fragility share its evaluator
     key = ((os.path.realpath(R.checkpoint_path(spec)), R.checkpoint_action(spec))
-           if R.parse_policy_spec(spec)[0] == "checkpoint" else spec, json.dumps(overrides, sort_keys=True), backend)
+           if R.parse_policy_spec(spec)[0] == "checkpoint" else spec, json.dumps(overrides, sort_keys=True), backend,
+           precision)
   t0 = time.perf_counter()
   if key is not None and key in shared:
     ev = shared[key]
@@ -121,7 +171,8 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
       shared[key] = ev
   per_ep = ev.run(E.episode_keys(seed, episodes), fragility, params=getattr(policy, "params", None))
   m = E.metrics(per_ep, ev.env.entity_names)
-  return {"policy": spec, "backend": backend, "fragility": fragility, "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
+  return {"policy": spec, "backend": backend, "fragility": fragility, "policy_precision": precision,
+          "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
           **{k: m[k] for k in ("completion", "safe_completion", "cost_mean", "avg_health", "min_env_health",
                                "task_return")}}
 
@@ -135,11 +186,14 @@ def render_md(res: dict) -> str:
            f"Command: `{res['command']}`", "",
            "Fragility f: every damage threshold ÷ f and scale × f (1: the task's own); a policy whose safe "
            "completion falls at f slightly above 1 stays just below the thresholds.", "",
-           "| policy | backend | fragility | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "Policy arithmetic: the network's matrix products in float32, or at TF32 precision as a recent NVIDIA "
+           "GPU computes them by default (emulated: inputs and weights rounded to a 10-bit mantissa).", "",
+           "| policy | backend | policy arithmetic | fragility | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
   for r in res["rows"]:
     kind, sep, path = r["policy"].partition(":")
-    lines.append(f"| `{kind}{sep}{os.path.basename(path)}` | {r['backend']} | {r.get('fragility', 1.0):g} | "
+    lines.append(f"| `{kind}{sep}{os.path.basename(path)}` | {r['backend']} | {r.get('policy_precision', 'float32')} | "
+                 f"{r.get('fragility', 1.0):g} | "
                  f"{100 * r['completion']:.1f} | "
                  f"{100 * r['safe_completion']:.1f} | {r['cost_mean']:.2f} | {r['avg_health']:.2f} | "
                  f"{r['min_env_health']:.2f} | {r['task_return']:.1f} | {r['wall_s']:.0f} |")
@@ -151,10 +205,10 @@ def main(argv=None) -> int:
   rows, shared = [], {}
   for spec, overrides, env in zip(args.policies, args.overrides, args.envs):
     for backend in args.backends:
-      for f in args.fragility:
-        rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f))
+      for precision, f in ((x, f) for x in args.policy_precision for f in args.fragility):
+        rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f, precision))
         r = rows[-1]
-        print(f"{spec} [{backend}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
+        print(f"{spec} [{backend}, {precision}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
               f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
   res = {"task": args.task, "episodes": args.episodes, "seed": args.seed, "rows": rows}
   stem = os.path.join(args.results_dir, f"policy_recheck_{args.task}" + (f"_{args.tag}" if args.tag else ""))

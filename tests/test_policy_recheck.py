@@ -6,6 +6,7 @@ import json
 import os
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import load_benchmark
@@ -66,6 +67,11 @@ def test_seed_suffix_loads_that_seeds_weights():
     (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#7"], "policy: seed 7"),
     (["--task", "place_plate", "--policies", f"checkpoint:{SAFE}#1"], "trained on task 'pick_egg'"),
     (["--task", "pick_egg", "--policies", "zero", "--task-arg", "start=\"flying\""], "start"),
+    (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1", "--policy-precision", "bf16"], "policy_precision"),
+    (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1", "--policy-precision", "tf32,tf32"],
+     "policy_precision"),
+    (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1,zero", "--policy-precision", "float32,tf32"],
+     "policy_precision: tf32 rounds a checkpoint policy's network; zero has none"),
 ])
 def test_bad_values_are_refused_before_anything_is_built(argv, says, tmp_path, capsys):
   with pytest.raises(SystemExit):
@@ -120,7 +126,7 @@ def test_fragility_levels_share_one_evaluator_and_lower_safety_of_a_policy_near_
     rows = json.load(f)["rows"]
   assert [r["fragility"] for r in rows] == [1.0, 4.0]
   assert rows[1]["safe_completion"] <= rows[0]["safe_completion"] and rows[1]["cost_mean"] > rows[0]["cost_mean"]
-  assert "| native | 4 |" in open(tmp_path / "policy_recheck_pick_egg_f.md").read()
+  assert "| native | float32 | 4 |" in open(tmp_path / "policy_recheck_pick_egg_f.md").read()
 
 
 def test_task_arg_overrides_a_checkpoints_settings():
@@ -132,3 +138,23 @@ def test_task_arg_overrides_a_checkpoints_settings():
     assert kw["counter"] == "box" and kw["obs_mode"] == "paper" and kw["robot"] == "gripper"
     assert env.unwrapped.counter == "box"
   assert recheck.parse(["--task", "place_plate", "--policies", f"checkpoint:{brax}#0"]).envs[0].unwrapped.counter == "plane"
+
+
+def test_tf32_policy_rounds_the_networks_products_and_is_a_row_of_its_own(tmp_path):
+  """--policy-precision float32,tf32: the same checkpoint scored with its matrix products at full float32 and
+  at TF32 (emulated); the TF32 action differs from the float32 one by rounding, not more."""
+  a = recheck.parse(["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1"])
+  env = a.envs[0]
+  policy = recheck.R.make_policy(a.policies[0], env)
+  state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+  full = policy(state, jax.random.PRNGKey(1))
+  tf32 = recheck.tf32_policy(policy)(state, jax.random.PRNGKey(1))
+  gap = float(jnp.max(jnp.abs(full - tf32)))
+  assert 0 < gap < 0.05, gap
+  assert recheck.main(["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1", "--backends", "native",
+                       "--episodes", "4", "--policy-precision", "float32,tf32", "--tag", "p",
+                       "--results-dir", str(tmp_path)]) == 0
+  with open(tmp_path / "policy_recheck_pick_egg_p.json") as f:
+    rows = json.load(f)["rows"]
+  assert [r["policy_precision"] for r in rows] == ["float32", "tf32"]
+  assert "| native | tf32 | 1 |" in open(tmp_path / "policy_recheck_pick_egg_p.md").read()
