@@ -205,11 +205,12 @@ def main(argv=None) -> int:
   rows, shared = [], {}
   for spec, overrides, env in zip(args.policies, args.overrides, args.envs):
     for backend in args.backends:
-      for precision, f in ((x, f) for x in args.policy_precision for f in args.fragility):
-        rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f, precision))
-        r = rows[-1]
-        print(f"{spec} [{backend}, {precision}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
-              f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
+      for precision in args.policy_precision:
+        for f in args.fragility:
+          rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f, precision))
+          r = rows[-1]
+          print(f"{spec} [{backend}, {precision}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
+                f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
   res = {"task": args.task, "episodes": args.episodes, "seed": args.seed, "rows": rows}
   stem = os.path.join(args.results_dir, f"policy_recheck_{args.task}" + (f"_{args.tag}" if args.tag else ""))
   provenance.save_results(res, "policy_recheck", argv, stem, render_md)

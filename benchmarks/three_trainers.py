@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import os
 import shlex
 import subprocess
@@ -52,7 +53,9 @@ from dataclasses import dataclass, field
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from mjx_damage import io, outputs  # noqa: E402
+from mjx_damage import io, outputs  # noqa: E402  (first: the package's JAX settings before JAX is imported)
+
+import jax  # noqa: E402
 
 HERE = os.path.join(ROOT, "benchmarks")
 RESULTS = os.path.join(HERE, "results")
@@ -359,7 +362,7 @@ def select(steps: list[Step], parts) -> list[Step]:
 
 def check_step(step: Step) -> None:
   """The step's own script parses its flags (the recipe's, the --*-args, the task settings): ``ValueError``
-  naming the step before anything is trained. Runs in this process on the CPU (main keeps JAX off the GPU)."""
+  naming the step before anything is trained. Runs in this process, on the CPU (``keep_jax_on_cpu``)."""
   module = _script(step.script[:-3])
   check = module.parse if step.trainer != "brax" else module.parse_args
   argv = [a for a in step.argv if a != "--resume"] if step.work else step.argv
@@ -390,8 +393,6 @@ def run_step(step: Step, env: dict) -> int:
 
 def _script(name: str):
   """``benchmarks/<name>.py`` as a module (its sibling imports resolve as when it runs as a script)."""
-  import importlib
-
   if HERE not in sys.path:
     sys.path.append(HERE)
   return importlib.import_module(name)
@@ -480,8 +481,6 @@ def keep_jax_on_cpu() -> None:
   GPU backend here would take 75 % of the GPU's memory from the steps, its children. The environment variable
   ``JAX_PLATFORMS`` is read when JAX is imported (``mjx_damage`` imports it above), so the config is set
   instead; it holds as long as no backend has started."""
-  import jax
-
   jax.config.update("jax_platforms", "cpu")
 
 
