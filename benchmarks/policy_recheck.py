@@ -17,6 +17,11 @@ of every dense layer rounded to a 10-bit mantissa, sums in float32), emulated he
 ``jax.lax.reduce_precision``; the physics keeps its own precision. A GPU-trained policy that scores differently
 here can so be told apart from one whose own arithmetic is the difference.
 
+``--matmul-precision default,float32`` scores each row also with every matrix product of the compiled program
+(physics and policy) at JAX's ``float32`` precision instead of the backend's default: the same on a CPU, while a
+recent NVIDIA GPU computes float32 products at TF32 by default. Run on a GPU, it tells whether TF32 in the
+simulation itself is why a policy scores differently there than here.
+
 Rows of one checkpoint file, action and backend share one compiled evaluator (the weights are its data), so
 re-scoring several seeds of a run compiles once per action and backend.
 
@@ -31,6 +36,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -50,6 +56,7 @@ import jax  # noqa: E402
 
 BACKENDS = ("mjx", "native")
 PRECISIONS = ("float32", "tf32")
+MATMUL_PRECISIONS = ("default", "float32")  # values of jax_default_matmul_precision ("default": the backend's own)
 
 
 def _tf32(x):
@@ -93,6 +100,10 @@ def parse(argv=None):
   p.add_argument("--policy-precision", default="float32",
                  help=f"comma-separated of {','.join(PRECISIONS)}, each a row: the checkpoint policies' matrix "
                       "products in full float32, or at TF32 precision as on a recent NVIDIA GPU (emulated)")
+  p.add_argument("--matmul-precision", default="default",
+                 help=f"comma-separated of {','.join(MATMUL_PRECISIONS)}, each a row: every matrix product of the "
+                      "compiled program (physics and policy) at the backend's default precision (TF32 on a recent "
+                      "NVIDIA GPU) or at full float32")
   p.add_argument("--tag", default="")
   p.add_argument("--results-dir", default=os.path.join(ROOT, "benchmarks", "results"))
   args = p.parse_args(argv)
@@ -119,6 +130,11 @@ def parse(argv=None):
             or any(v not in PRECISIONS for v in args.policy_precision)):
       raise ValueError(f"policy_precision: comma-separated of {', '.join(PRECISIONS)}, each at most once, "
                        f"got {','.join(args.policy_precision)!r}")
+    args.matmul_precision = [v.strip() for v in args.matmul_precision.split(",") if v.strip()]
+    if (not args.matmul_precision or len(set(args.matmul_precision)) != len(args.matmul_precision)
+            or any(v not in MATMUL_PRECISIONS for v in args.matmul_precision)):
+      raise ValueError(f"matmul_precision: comma-separated of {', '.join(MATMUL_PRECISIONS)}, each at most once, "
+                       f"got {','.join(args.matmul_precision)!r}")
     if "tf32" in args.policy_precision:
       other = [s for s in args.policies if R.parse_policy_spec(s)[0] != "checkpoint"]
       if other:
@@ -141,14 +157,17 @@ def parse(argv=None):
 
 
 def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: int, seed: int,
-            shared: dict | None = None, fragility: float = 1.0, precision: str = "float32") -> dict:
+            shared: dict | None = None, fragility: float = 1.0, precision: str = "float32",
+            matmul: str = "default") -> dict:
   """``spec`` on ``env`` (``task`` made with ``overrides``) over ``episodes`` episodes of ``backend``:
   E.evaluate's metrics.
 
   ``shared``: evaluators kept between calls, one per (checkpoint and action, or scripted spec; settings;
-  backend, precision): the seeds of one checkpoint differ only in their weights and the levels of ``fragility`` are an
+  backend, precision, matmul): the seeds of one checkpoint differ only in their weights and the levels of ``fragility`` are an
   argument, both data of the evaluator, so one compiled program scores them all (the numbers are those of a fresh evaluator: the same program, the same inputs).
-  ``precision``: "tf32" scores the policy with :func:`tf32_policy`.
+  ``precision``: "tf32" scores the policy with :func:`tf32_policy`. ``matmul``: "float32" traces and compiles the
+  evaluator with ``jax.default_matmul_precision("float32")`` (the precision is fixed when a program is traced, so
+  it is a key of ``shared``).
   """
   policy = R.make_policy(spec, env)
   if precision == "tf32":
@@ -158,21 +177,22 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
   if shared is not None:  # a scripted policy is kept too: its levels of fragility share its evaluator
     key = ((os.path.realpath(R.checkpoint_path(spec)), R.checkpoint_action(spec))
            if R.parse_policy_spec(spec)[0] == "checkpoint" else spec, json.dumps(overrides, sort_keys=True), backend,
-           precision)
+           precision, matmul)
   t0 = time.perf_counter()
-  if key is not None and key in shared:
-    ev = shared[key]
-  else:
-    env_b = R.on_backend(env, backend, episodes)
-    E.check_args(episodes, 1.0, 95.0, seed=seed)
-    E.check_memory(env_b, episodes)
-    ev = E.make_evaluator(env_b, policy, T)
-    if key is not None:
-      shared[key] = ev
-  per_ep = ev.run(E.episode_keys(seed, episodes), fragility, params=getattr(policy, "params", None))
+  with contextlib.nullcontext() if matmul == "default" else jax.default_matmul_precision(matmul):
+    if key is not None and key in shared:
+      ev = shared[key]
+    else:
+      env_b = R.on_backend(env, backend, episodes)
+      E.check_args(episodes, 1.0, 95.0, seed=seed)
+      E.check_memory(env_b, episodes)
+      ev = E.make_evaluator(env_b, policy, T)
+      if key is not None:
+        shared[key] = ev
+    per_ep = ev.run(E.episode_keys(seed, episodes), fragility, params=getattr(policy, "params", None))
   m = E.metrics(per_ep, ev.env.entity_names)
   return {"policy": spec, "backend": backend, "fragility": fragility, "policy_precision": precision,
-          "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
+          "matmul_precision": matmul, "task_kwargs": overrides, "wall_s": round(time.perf_counter() - t0, 1),
           **{k: m[k] for k in ("completion", "safe_completion", "cost_mean", "avg_health", "min_env_health",
                                "task_return")}}
 
@@ -188,12 +208,14 @@ def render_md(res: dict) -> str:
            "completion falls at f slightly above 1 stays just below the thresholds.", "",
            "Policy arithmetic: the network's matrix products in float32, or at TF32 precision as a recent NVIDIA "
            "GPU computes them by default (emulated: inputs and weights rounded to a 10-bit mantissa).", "",
-           "| policy | backend | policy arithmetic | fragility | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "Matmul precision: every matrix product of the compiled program (physics and policy) at the backend's "
+           "default (`default`: float32 on a CPU, TF32 on a recent NVIDIA GPU) or at full `float32`.", "",
+           "| policy | backend | policy arithmetic | matmul precision | fragility | completion % | safe completion % | episode cost | avg health | min health | task return | s |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for r in res["rows"]:
     kind, sep, path = r["policy"].partition(":")
     lines.append(f"| `{kind}{sep}{os.path.basename(path)}` | {r['backend']} | {r.get('policy_precision', 'float32')} | "
-                 f"{r.get('fragility', 1.0):g} | "
+                 f"{r.get('matmul_precision', 'default')} | {r.get('fragility', 1.0):g} | "
                  f"{100 * r['completion']:.1f} | "
                  f"{100 * r['safe_completion']:.1f} | {r['cost_mean']:.2f} | {r['avg_health']:.2f} | "
                  f"{r['min_env_health']:.2f} | {r['task_return']:.1f} | {r['wall_s']:.0f} |")
@@ -206,11 +228,13 @@ def main(argv=None) -> int:
   for spec, overrides, env in zip(args.policies, args.overrides, args.envs):
     for backend in args.backends:
       for precision in args.policy_precision:
-        for f in args.fragility:
-          rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f, precision))
-          r = rows[-1]
-          print(f"{spec} [{backend}, {precision}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, safe {100 * r['safe_completion']:.1f} %, "
-                f"cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
+        for matmul in args.matmul_precision:
+          for f in args.fragility:
+            rows.append(rescore(args.task, env, spec, overrides, backend, args.episodes, args.seed, shared, f,
+                                precision, matmul))
+            r = rows[-1]
+            print(f"{spec} [{backend}, {precision}, matmul {matmul}, fragility {f:g}]: completion {100 * r['completion']:.1f} %, "
+                  f"safe {100 * r['safe_completion']:.1f} %, cost {r['cost_mean']:.2f} ({r['wall_s']:.0f} s)", flush=True)
   res = {"task": args.task, "episodes": args.episodes, "seed": args.seed, "rows": rows}
   stem = os.path.join(args.results_dir, f"policy_recheck_{args.task}" + (f"_{args.tag}" if args.tag else ""))
   provenance.save_results(res, "policy_recheck", argv, stem, render_md)

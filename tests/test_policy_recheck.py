@@ -72,6 +72,9 @@ def test_seed_suffix_loads_that_seeds_weights():
      "policy_precision"),
     (["--task", "pick_egg", "--policies", f"checkpoint:{SAFE}#1,zero", "--policy-precision", "float32,tf32"],
      "policy_precision: tf32 rounds a checkpoint policy's network; zero has none"),
+    (["--task", "pick_egg", "--policies", "zero", "--matmul-precision", "highest"], "matmul_precision"),
+    (["--task", "pick_egg", "--policies", "zero", "--matmul-precision", "float32,float32"], "matmul_precision"),
+    (["--task", "pick_egg", "--policies", "zero", "--matmul-precision", ","], "matmul_precision"),
 ])
 def test_bad_values_are_refused_before_anything_is_built(argv, says, tmp_path, capsys):
   with pytest.raises(SystemExit):
@@ -126,7 +129,7 @@ def test_fragility_levels_share_one_evaluator_and_lower_safety_of_a_policy_near_
     rows = json.load(f)["rows"]
   assert [r["fragility"] for r in rows] == [1.0, 4.0]
   assert rows[1]["safe_completion"] <= rows[0]["safe_completion"] and rows[1]["cost_mean"] > rows[0]["cost_mean"]
-  assert "| native | float32 | 4 |" in open(tmp_path / "policy_recheck_pick_egg_f.md").read()
+  assert "| native | float32 | default | 4 |" in open(tmp_path / "policy_recheck_pick_egg_f.md").read()
 
 
 def test_task_arg_overrides_a_checkpoints_settings():
@@ -157,4 +160,30 @@ def test_tf32_policy_rounds_the_networks_products_and_is_a_row_of_its_own(tmp_pa
   with open(tmp_path / "policy_recheck_pick_egg_p.json") as f:
     rows = json.load(f)["rows"]
   assert [r["policy_precision"] for r in rows] == ["float32", "tf32"]
-  assert "| native | tf32 | 1 |" in open(tmp_path / "policy_recheck_pick_egg_p.md").read()
+  assert "| native | tf32 | default | 1 |" in open(tmp_path / "policy_recheck_pick_egg_p.md").read()
+
+
+def test_matmul_precision_is_fixed_when_the_evaluator_traces_and_is_a_row_of_its_own(tmp_path, monkeypatch):
+  """--matmul-precision default,float32: the second row's program is traced under float32 matmul precision (what
+  a GPU needs to compute without TF32), the first under the backend's default; on this CPU both score alike."""
+  seen = []
+  make_policy = recheck.R.make_policy
+
+  def recording(spec, env):
+    policy = make_policy(spec, env)
+
+    def traced(state, rng):  # runs when the evaluator traces the policy
+      seen.append(jax.config.jax_default_matmul_precision)
+      return policy(state, rng)
+    return traced
+  monkeypatch.setattr(recheck.R, "make_policy", recording)
+  assert recheck.main(["--task", "pick_egg", "--policies", "scripted:safe", "--backends", "native",
+                       "--episodes", "4", "--matmul-precision", "default,float32", "--tag", "m",
+                       "--results-dir", str(tmp_path)]) == 0
+  assert seen and seen[0] is None and seen[-1] == "float32" and set(seen) == {None, "float32"}
+  with open(tmp_path / "policy_recheck_pick_egg_m.json") as f:
+    rows = json.load(f)["rows"]
+  assert [r["matmul_precision"] for r in rows] == ["default", "float32"]
+  assert {k: v for k, v in rows[0].items() if k not in ("wall_s", "matmul_precision")} == \
+      {k: v for k, v in rows[1].items() if k not in ("wall_s", "matmul_precision")}
+  assert "| native | float32 | float32 | 1 |" in open(tmp_path / "policy_recheck_pick_egg_m.md").read()
