@@ -36,7 +36,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import sys
@@ -46,6 +45,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import mjx_damage  # noqa: E402,F401  (XLA:CPU flags and the jax compat shim before jax starts)
+from mjx_damage import runtime  # noqa: E402
 
 import provenance  # noqa: E402  (the sibling module: the results writer)
 from apps import resolve as R  # noqa: E402
@@ -56,7 +56,7 @@ import jax  # noqa: E402
 
 BACKENDS = ("mjx", "native")
 PRECISIONS = ("float32", "tf32")
-MATMUL_PRECISIONS = ("default", "float32")  # values of jax_default_matmul_precision ("default": the backend's own)
+MATMUL_PRECISIONS = runtime.MATMUL_PRECISIONS  # "default": the backend's own, whatever JAX's setting outside
 
 
 def _tf32(x):
@@ -165,9 +165,9 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
   ``shared``: evaluators kept between calls, one per (checkpoint and action, or scripted spec; settings;
   backend, precision, matmul): the seeds of one checkpoint differ only in their weights and the levels of ``fragility`` are an
   argument, both data of the evaluator, so one compiled program scores them all (the numbers are those of a fresh evaluator: the same program, the same inputs).
-  ``precision``: "tf32" scores the policy with :func:`tf32_policy`. ``matmul``: "float32" traces and compiles the
-  evaluator with ``jax.default_matmul_precision("float32")`` (the precision is fixed when a program is traced, so
-  it is a key of ``shared``).
+  ``precision``: "tf32" scores the policy with :func:`tf32_policy`. ``matmul``: the evaluator is traced and compiled
+  under ``jax.default_matmul_precision`` of it ("default": the backend's own, even where JAX_DEFAULT_MATMUL_PRECISION
+  says otherwise); the precision is fixed when a program is traced, so it is a key of ``shared``.
   """
   policy = R.make_policy(spec, env)
   if precision == "tf32":
@@ -179,7 +179,7 @@ def rescore(task: str, env, spec: str, overrides: dict, backend: str, episodes: 
            if R.parse_policy_spec(spec)[0] == "checkpoint" else spec, json.dumps(overrides, sort_keys=True), backend,
            precision, matmul)
   t0 = time.perf_counter()
-  with contextlib.nullcontext() if matmul == "default" else jax.default_matmul_precision(matmul):
+  with jax.default_matmul_precision(None if matmul == "default" else matmul):
     if key is not None and key in shared:
       ev = shared[key]
     else:

@@ -409,6 +409,11 @@ def _action_label(row: dict) -> str:
   return "" if head == "mode" else f", {head} action"
 
 
+def _matmul_label(row: dict) -> str:
+  precision = row.get("matmul_precision", "default")  # rows written before the flag: JAX's default
+  return "" if precision == "default" else f", {precision} matmuls"
+
+
 def _robot_named(settings: dict | None) -> dict | None:
   """``settings`` with the robot they ran (rows written before the RL settings named one: tasks.UNNAMED_ROBOT)."""
   return None if settings is None else {"robot": tasks.UNNAMED_ROBOT, **settings}
@@ -461,7 +466,7 @@ def render_md(doc: dict) -> str:
   ]
   for r in doc["rows"]:
     lines.append(
-        f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)}{_action_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
+        f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)}{_action_label(r)}{_matmul_label(r)} | {r['seed']} | {r['env_steps'] / 1e6:.2f} M | {r['train_wall_s']:.0f}"
         f"{' (budget)' if r['stopped_by_budget'] else ''} | {100 * r['completion']:.1f} % "
         f"| {100 * r['safe_completion']:.1f} % | {r['avg_env_health']:.2f} | {r['episode_cost']:.2f} "
         f"| {r['eval_episodes']} | {_t80_label(r)} | {_run_label(r)} | `{r['command']}`{' (' + r['note'] + ')' if r.get('note') else ''} |")
@@ -473,7 +478,7 @@ def render_md(doc: dict) -> str:
               "|---|---|---|---|---|---|---|---|"]
     for r in several:
       for a, v in r["by_action"].items():
-        lines.append(f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)} | {r['seed']} "
+        lines.append(f"| {r['reward']}{_std_label(r)}{_settings_label(r, doc)}{_matmul_label(r)} | {r['seed']} "
                      f"| {r['env_steps'] / 1e6:.2f} M | {a} "
                      f"| {100 * v['completion']:.1f} % | {100 * v['safe_completion']:.1f} % | {v['episode_cost']:.2f} "
                      f"| {_run_label(r)} |")
@@ -550,6 +555,10 @@ def parse_args(argv=None):
   p.add_argument("--deterministic", action="store_true",
                  help="deterministic XLA GPU kernels: a rerun of a seed repeats it bit for bit, at 0.72–0.94× the "
                       "throughput on an H200 (mjx_damage.runtime); CPU runs repeat without it")
+  p.add_argument("--matmul-precision", default=None, choices=runtime.MATMUL_PRECISIONS,
+                 help="float32 matrix products (physics, networks) at the backend's default precision (TF32 on a "
+                      "recent NVIDIA GPU) or at full float32 (mjx_damage.runtime); default: JAX's setting "
+                      "(JAX_DEFAULT_MATMUL_PRECISION), recorded in the results either way")
   p.add_argument("--shared-card", type=int, default=1, metavar="N",
                  help="the runs of this call (or, with --merge, of the merged files) ran N at a time on one device: "
                       "rows record it and their seconds are not compared with runs that had the device alone")
@@ -569,6 +578,8 @@ def parse_args(argv=None):
     return a
   if a.deterministic:  # before anything starts a backend: XLA reads its flags once
     runtime.use_deterministic_gpu_ops("deterministic")
+  if a.matmul_precision is not None:  # before anything is traced
+    runtime.use_matmul_precision(a.matmul_precision, "matmul_precision")
   tasks.task_class(a.task)  # ValueError listing the valid names, before anything compiles
   a.weights = _csv(a.damage_weights, float, "damage_weights")
   a.seed_list = _csv(a.seeds, int, "seeds")
@@ -665,8 +676,7 @@ def main(argv=None) -> int:
     return 0
   command = "python benchmarks/rl_brax_ppo.py " + " ".join(
       shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
-  if runtime.deterministic_gpu_ops() and not a.deterministic:  # set through XLA_FLAGS: the same run
-    command += " --deterministic"
+  command += runtime.flags_in_force(a.deterministic, a.matmul_precision)  # set through the environment
   cfg = dict(PLAYGROUND_PANDA_PICK_CUBE, num_timesteps=a.num_timesteps, num_envs=a.num_envs,
              batch_size=a.batch_size, num_minibatches=a.num_minibatches, unroll_length=a.unroll_length,
              num_evals=a.num_evals, num_eval_envs=a.num_eval_envs, num_resets_per_eval=a.num_resets_per_eval,
@@ -696,7 +706,8 @@ def main(argv=None) -> int:
                       export=policy_path(stem, w, s) if a.export_policy else None, curve_episodes=a.curve_episodes,
                       eval_settings=a.eval_settings, cont=cont)
       row.update(command=command.strip(), date=time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
-                 recipe=doc["recipe"], **({"card_shared_by": a.shared_card} if a.shared_card > 1 else {}))
+                 recipe=doc["recipe"], matmul_precision=runtime.matmul_precision(),
+                 **({"card_shared_by": a.shared_card} if a.shared_card > 1 else {}))
       print(f"  completion {100 * row['completion']:.1f} %, safe completion {100 * row['safe_completion']:.1f} %, "
             f"{row['env_steps']} env-steps, {row['train_wall_s']} s, time to 80 % safe "
             f"{_t80_label(row)}", flush=True)

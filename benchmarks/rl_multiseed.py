@@ -162,6 +162,8 @@ def method_spec(name: str, args) -> dict:
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
+  if runtime.matmul_precision() != "default":  # --matmul-precision or JAX_DEFAULT_MATMUL_PRECISION
+    spec = dict(spec, label=spec["label"] + f", {runtime.matmul_precision()} matmuls")
   return spec
 
 
@@ -276,6 +278,10 @@ def parse(argv):
   p.add_argument("--deterministic", action="store_true",
                  help="deterministic XLA GPU kernels: a rerun of a command repeats it bit for bit, at 0.73–0.76× the "
                       "throughput on an H200 (mjx_damage.runtime); CPU runs repeat without it")
+  p.add_argument("--matmul-precision", default=None, choices=runtime.MATMUL_PRECISIONS,
+                 help="float32 matrix products (physics, networks) at the backend's default precision (TF32 on a "
+                      "recent NVIDIA GPU) or at full float32 (mjx_damage.runtime); default: JAX's setting "
+                      "(JAX_DEFAULT_MATMUL_PRECISION), recorded in the results either way")
   p.add_argument("--tag", default="", help="file-name suffix: rl_<task>_<device>_<tag>.{json,md}")
   p.add_argument("--combine", nargs="+", metavar="FILE.json", help="no training: merge earlier results into one table")
   p.add_argument("--headline-action", default=None,
@@ -419,6 +425,8 @@ def parse(argv):
       runtime.use_deterministic_gpu_ops("--deterministic")
     except (ValueError, RuntimeError) as e:
       p.error(str(e))
+  if args.matmul_precision is not None:  # before anything is traced
+    runtime.use_matmul_precision(args.matmul_precision)
   return args
 
 
@@ -542,6 +550,7 @@ def run_method(name: str, args, command: str, work: str) -> dict:
                     out_dir=run_dir, time_limit=args.budget_seconds, progress=True, resume=args.resume,
                     eval_task_kwargs=eval_kwargs, **kw)
   calls.append({"command": command, "date": time.strftime("%Y-%m-%d %H:%M"), "device": device_info()[1],
+                "matmul_precision": runtime.matmul_precision(),  # of this call; a resumed run's calls each say theirs
                 "iterations_at_end": res.iterations, "env_steps_per_seed_at_end": res.env_steps,
                 "wall_time_s": round(res.wall_time, 1)})
   io.write_json(calls_path, calls, indent=1)
@@ -572,6 +581,7 @@ def run_method(name: str, args, command: str, work: str) -> dict:
   curves = f"rl_{name}_curves.png"
   return {
       "label": spec["label"], "method": name, "command": command, "calls": calls,
+      "matmul_precision": runtime.matmul_precision(),
       "eval_actions": list(args.eval_actions),
       "train_kwargs": kw, "task_kwargs": task_kwargs,
       **({} if eval_kwargs is None else {"eval_task_kwargs": eval_kwargs}),
@@ -732,8 +742,7 @@ def main(argv=None) -> int:
   work = args.work_dir or tempfile.mkdtemp(prefix=f"rl_multiseed_{task_slug}_{slug}_")
   command = " ".join(shlex.quote(a) for a in ["benchmarks/rl_multiseed.py"]
                      + list(sys.argv[1:] if argv is None else argv))
-  if runtime.deterministic_gpu_ops() and not args.deterministic:  # set through XLA_FLAGS: the same run
-    command += " --deterministic"
+  command += runtime.flags_in_force(args.deterministic, args.matmul_precision)  # set through the environment
   payload = {"device": device, "jax": jax.__version__, "task": args.task, "eval_episodes": args.eval_episodes,
              "date": time.strftime("%Y-%m-%d %H:%M"), "rows": []}
   from train.ppo import TrainingDiverged  # after argparse, as run_method's imports

@@ -144,6 +144,13 @@ def _brax_changes(recipe: dict) -> str:
   return ", ".join(out)
 
 
+def _matmuls(row: dict) -> str:
+  """Runs at another float32 matmul precision than the backend's default are other runs (docs/rl_task_design.md,
+  "TF32 in the simulation"); rows written before it was recorded ran at the default."""
+  precision = row.get("matmul_precision", "default")
+  return "" if precision == "default" else f"{precision} matmuls"
+
+
 def _clip(max_grad_norm: float | None) -> str:
   return "no gradient clipping" if max_grad_norm is None else f"grad-norm clip {max_grad_norm:g}"
 
@@ -169,7 +176,7 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
     s = _scores(r.get("by_action"), r, (r.get("eval_actions") or ["mode"])[0], action)
     runs.append(dict(trainer=BRAX, reward=_reward(r["damage_weight"]), seed=r["seed"], device=doc["device"],
                      settings=_settings(_std(r.get("recipe", {}).get("init_log_std")),
-                                        _brax_changes(r.get("recipe", {})), _budget(r), actor,
+                                        _brax_changes(r.get("recipe", {})), _budget(r), _matmuls(r), actor,
                                         _task_settings(r.get("task_settings", doc.get("task_settings")),
                                                        r.get("eval_task_settings"))),
                      env_steps=r["env_steps"], scores=s, command=r["command"], source=source,
@@ -201,7 +208,8 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
         "entropy annealed" if kw.get("anneal_entropy") else "",
         f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "",
         _clip(kw["max_grad_norm"]) if "max_grad_norm" in kw else "",
-        _obs_clip(kw["obs_clip"]) if kw.get("obs_clip") is not None else "")
+        _obs_clip(kw["obs_clip"]) if kw.get("obs_clip") is not None else "",
+        _matmuls(r))
         if x)
     head = (r.get("eval_actions") or ["mode"])[0]
     for p in r["per_seed"]:

@@ -46,6 +46,14 @@ H200s gave identical curves and final policies, at 0.73–0.76× (our trainer) a
 the training throughput of runs without it (``benchmarks/training_repeatability.py``; docs/safe_rl.md,
 "Repeatable GPU runs"). CPU runs are repeatable without it.
 
+**Matrix-product precision** (opt-in: :func:`use_matmul_precision`, the ``--matmul-precision`` option of the
+same three commands; JAX's own ``JAX_DEFAULT_MATMUL_PRECISION`` has the same effect). By default JAX computes
+float32 matrix products at TF32 (a 10-bit mantissa) on recent NVIDIA GPUs and in full float32 on a CPU, so MJX on
+a GPU is, in its last bits, another simulator; a policy can learn behaviour that only TF32 makes reliable (one
+Shelve Item policy carried in 100 % of episodes at TF32 and 48 % at float32: docs/rl_task_design.md, "TF32 in
+the simulation"). ``float32`` traces every program from then on at full precision; :func:`matmul_precision`
+says which is in force, for results files.
+
 **Persistent compilation cache** (``MJX_DAMAGE_CACHE_DIR=<dir>`` to move it,
 ``MJX_DAMAGE_CACHE_DIR=off`` to switch it off). Compiling a task step takes
 15–30 s on a laptop CPU; with JAX's persistent cache the second run of the same
@@ -158,6 +166,47 @@ def use_deterministic_gpu_ops(field: str = "--deterministic") -> None:
     raise RuntimeError(f"{field}: JAX's backends already started, so XLA would ignore {GPU_DETERMINISM_FLAG}; "
                        "ask for it before the first computation, or export XLA_FLAGS before starting Python")
   os.environ["XLA_FLAGS"] = (flags + " " + GPU_DETERMINISM_FLAG).strip()
+
+
+# --matmul-precision values: the backend's own, or full float32 (JAX's "highest" is the same)
+MATMUL_PRECISIONS = ("default", "float32")
+
+
+def matmul_precision() -> str:
+  """JAX's precision for float32 matrix products traced now: "default" (the backend's own: TF32 on recent NVIDIA
+  GPUs, float32 on a CPU), "float32" (also for JAX's synonym "highest"), or another ``jax_default_matmul_precision``
+  value as JAX names it."""
+  import jax
+
+  value = jax.config.jax_default_matmul_precision
+  return {None: "default", "default": "default", "highest": "float32"}.get(value, str(value))
+
+
+def use_matmul_precision(value: str, field: str = "--matmul-precision") -> None:
+  """Trace every program from now on with float32 matrix products at ``value`` (:data:`MATMUL_PRECISIONS`).
+
+  The precision is fixed when a program is traced, so this may come after a backend started; programs traced
+  before keep theirs. Raises ValueError naming ``field`` for another value.
+  """
+  if value not in MATMUL_PRECISIONS:
+    raise ValueError(f"{field}: one of {', '.join(MATMUL_PRECISIONS)}, got {value!r}")
+  import jax
+
+  jax.config.update("jax_default_matmul_precision", None if value == "default" else value)
+
+
+def flags_in_force(deterministic: bool, precision: str | None) -> str:
+  """The options a training command needs to repeat this process's run beyond those it was given
+  (``deterministic``: ``--deterministic`` given; ``precision``: the ``--matmul-precision`` given, or None):
+  ``" --deterministic"`` when XLA_FLAGS asked for :data:`GPU_DETERMINISM_FLAG`, ``" --matmul-precision V"`` when
+  JAX_DEFAULT_MATMUL_PRECISION set V (one the option refuses, if V is not in :data:`MATMUL_PRECISIONS`: a rerun
+  then stops rather than run at another precision). Empty when the command says it all."""
+  out = ""
+  if deterministic_gpu_ops() and not deterministic:
+    out += " --deterministic"
+  if precision is None and matmul_precision() != "default":
+    out += f" --matmul-precision {matmul_precision()}"
+  return out
 
 
 def cache_dir() -> str | None:

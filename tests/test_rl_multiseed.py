@@ -47,6 +47,7 @@ def test_rows_have_per_seed_stats_and_commands(two_calls):
     assert s["n"] == 2 and s["min"] == min(vals) and abs(s["mean"] - sum(vals) / 2) < 1e-12
     assert "--methods task_only,pid" in r["command"] and r["throughput_all_seeds"] > 0  # 2 iterations: 1 timed
     assert {h["seed"] for h in r["history"]} == {0, 1}
+    assert r["matmul_precision"] == "default" and [c["matmul_precision"] for c in r["calls"]] == ["default"]
   assert a["rows"][1]["config"]["multiplier"] == "pid" and a["rows"][1]["config"]["budget"] == 2.0
   assert os.path.isfile(os.path.join(two_calls, "rl_pusherenv_cpu_a_pid.png"))
   for r in a["rows"]:  # the first action is the headline; every action is kept per seed

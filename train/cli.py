@@ -189,6 +189,9 @@ def build_parser() -> Parser:
   p.add_argument("--deterministic", action="store_true",
                  help="deterministic XLA GPU kernels: a rerun repeats the run bit for bit, at 0.73–0.76× the "
                       "throughput on an H200 (mjx_damage.runtime); CPU runs repeat without it")
+  p.add_argument("--matmul-precision", dest="matmul_precision", default=None, choices=runtime.MATMUL_PRECISIONS,
+                 help="float32 matrix products (physics, networks) at the backend's default precision (TF32 on a "
+                      "recent NVIDIA GPU) or at full float32 (mjx_damage.runtime) (default: JAX's setting)")
   p.add_argument("--init-from", dest="init_from", default=None, metavar="RUN",
                  help="start every seed's actor and normaliser from this checkpoint (mjx-damage bc, or a train "
                       "run); the critic starts fresh (default: none)")
@@ -278,6 +281,7 @@ def main(argv=None) -> int:
   p = build_parser()
   args, config = split_args(vars(p.parse_args(argv)))
   task, overwrite, deterministic = args.pop("task"), args.pop("overwrite"), args.pop("deterministic")
+  matmul_precision = args.pop("matmul_precision")
   dist = {k: args.pop(k) for k in DIST_FLAGS}
   try:  # everything the user typed is checked here, before JAX starts
     if deterministic:  # XLA reads its flags when the first backend starts
@@ -285,6 +289,8 @@ def main(argv=None) -> int:
         runtime.use_deterministic_gpu_ops("--deterministic")
       except RuntimeError as e:  # main() called in a process that already computed something
         raise ValueError(str(e)) from None
+    if matmul_precision is not None:  # fixed when a program is traced: anything traced from here on
+      runtime.use_matmul_precision(matmul_precision)
     setup = distributed.check(**dist)
     import tasks  # the registry (loads JAX, compiles nothing)
     task_kwargs, robot = tasks.parse_task_args(args.pop("task_arg")), args.pop("robot")
@@ -358,7 +364,8 @@ def main(argv=None) -> int:
   print(f"train: task {task}, preset {args['preset']}, {cfg.num_envs} envs x {cfg.num_timesteps:,} env steps "
         f"per seed{size}, seeds {list(cfg.seeds)}, device {platform} x {len(devices)} (mesh seeds x envs "
         f"{M.shape(len(devices), cfg.num_seeds)}, {jax.process_count()} process(es)"
-        f"{', deterministic GPU kernels' if runtime.deterministic_gpu_ops() and platform != 'cpu' else ''}); "
+        f"{', deterministic GPU kernels' if runtime.deterministic_gpu_ops() and platform != 'cpu' else ''}"
+        f"{', ' + runtime.matmul_precision() + ' matmuls' if runtime.matmul_precision() != 'default' else ''}); "
         f"run directory {args['out_dir']}{' (resuming)' if args['resume'] else ''}", flush=True)
   say_compiling(COMPILE_S, platform, default=90)
   try:
