@@ -17,7 +17,8 @@ The key is a SHA-256 over everything the traced program depends on:
 * :func:`fingerprint` of the source trees that build the program (every file:
   Python and the MJCF scenes beside it);
 * the versions of the libraries that trace it, the Python version, JAX's x64 flag
-  and the device platform and count.
+  and float32 matmul precision (:func:`mjx_damage.runtime.matmul_precision`; a program traced at TF32 is
+  another program than one at float32) and the device platform and count.
 
 So only a caller that can *name* everything its function closes over may use it
 (the CLI: a program built from names and files); a Python user passing arbitrary
@@ -101,6 +102,7 @@ def key(description: dict, args, roots: Sequence[str]) -> str:
       "versions": _versions(),
       "python": list(sys.version_info[:2]),
       "x64": bool(jax.config.jax_enable_x64),
+      "matmul_precision": runtime.matmul_precision(),
       "devices": [jax.default_backend(), jax.device_count()],
   }
   return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()

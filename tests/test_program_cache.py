@@ -6,6 +6,7 @@ import warnings
 
 import jax
 import jax.numpy as jnp
+from jax import export
 import numpy as np
 import pytest
 
@@ -68,6 +69,22 @@ def test_key_covers_description_shapes_and_sources(cache, roots):
   P.fingerprint.cache_clear()
   assert P.key({"name": "f"}, a5, roots) != k0
   assert P.load_or_export(f, a5, {"name": "f"}, roots)[1] == "exported"
+
+
+def test_key_covers_the_matmul_precision(cache, roots):
+  """A program traced at float32 matmul precision is another program: one loaded from a run at the backend's
+  default (TF32 on a GPU) would silently compute at that precision (docs/rl_task_design.md, "TF32 in the
+  simulation")."""
+  def f(x):
+    return x @ x
+  a = (np.eye(3, dtype=np.float32),)
+  assert P.load_or_export(jax.jit(f), a, {"name": "mm"}, roots)[1] == "exported"
+  with jax.default_matmul_precision("float32"):
+    assert P.load_or_export(jax.jit(f), a, {"name": "mm"}, roots)[1] == "exported"
+    assert P.load_or_export(jax.jit(f), a, {"name": "mm"}, roots)[1] == "loaded"
+  assert P.load_or_export(jax.jit(f), a, {"name": "mm"}, roots)[1] == "loaded"
+  programs = [export.deserialize(bytearray(p.read_bytes())).mlir_module() for p in cache.iterdir()]
+  assert sorted("HIGHEST" in m for m in programs) == [False, True]  # one entry per precision
 
 
 def test_corrupt_entry_is_retraced(cache, roots):
