@@ -14,7 +14,7 @@ import time
 import jax
 
 from apps import resolve as R
-from mjx_damage import outputs
+from mjx_damage import outputs, runtime
 from mjx_damage.io import write_json
 import tasks
 from train import evaluate as E
@@ -40,6 +40,9 @@ def build_parser() -> Parser:
                   help="result JSON path (default: runs/eval-<task>-<time>/result.json, a new folder)")
   ap.add_argument("--overwrite", action="store_true", help="replace an existing --out")
   ap.add_argument("--per-episode", action="store_true", help="include per-episode arrays in the JSON")
+  ap.add_argument("--matmul-precision", default=None, choices=runtime.MATMUL_PRECISIONS,
+                  help="float32 matrix products (physics, policy) at the backend's default precision (TF32 on a "
+                       "recent NVIDIA GPU) or at full float32, as a CPU computes them (default: JAX's setting)")
   return ap
 
 
@@ -57,6 +60,8 @@ def main(argv=None) -> int:
       raise ValueError(f"episode_length: must be >= 1, got {args.episode_length}")
     if args.out is not None:
       outputs.check_new([args.out], "--out", args.overwrite)
+    if args.matmul_precision is not None:  # before anything is traced
+      runtime.use_matmul_precision(args.matmul_precision)
     out = args.out or os.path.join(outputs.run_dir("eval", args.task), "result.json")
     overrides = R.task_overrides(args.task, R.policy_task_kwargs(args.policy, args.task), args.robot, args.task_arg)
     # --backend warp: the task is made on MuJoCo Warp, every episode of the call in its one batch
@@ -72,7 +77,8 @@ def main(argv=None) -> int:
   print(f"eval: task {args.task}, policy {args.policy}, {args.episodes} episodes x {episode_length} steps, "
         f"fragility {args.fragility:g}, seed {args.seed}, backend {backend}"
         f"{R.auto_reason(args.backend, backend, [args.policy])}, "
-        f"device {platform} x {jax.device_count()}; "
+        f"device {platform} x {jax.device_count()}"
+        f"{', ' + runtime.matmul_precision() + ' matmuls' if runtime.matmul_precision() != 'default' else ''}; "
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()
@@ -94,6 +100,7 @@ def main(argv=None) -> int:
       "seed": args.seed,
       "fragility": args.fragility, "episode_length": res["episode_length"], "backend": backend,
       "backend_requested": args.backend,
+      "matmul_precision": runtime.matmul_precision(),
       "command": "mjx-damage eval " + " ".join(sys.argv[1:] if argv is None else argv),
       "metrics": res["metrics"], "wall_s": wall,
   }

@@ -141,6 +141,7 @@ print("RESULT" + json.dumps({{k: np.asarray(v).tolist() for k, v in out.items()}
         (["--task", "push_boxes", "--policy", "zero", "--fragility", "0"], "fragility"),
         (["--task", "push_boxes", "--policy", "zero", "--fragility", "-2"], "fragility"),
         (["--task", "no_such_task", "--policy", "zero"], "task"),
+        (["--task", "push_boxes", "--policy", "zero", "--matmul-precision", "highest"], "--matmul-precision"),
     ],
 )
 def test_eval_cli_rejects_bad_arguments(argv, field, capsys, monkeypatch):

@@ -240,6 +240,24 @@ def test_eval_defaults_to_auto_and_records_the_backend_it_used(tmp_path, capsys)
   assert "backend native (auto)" in capsys.readouterr().out
 
 
+def test_eval_records_the_matmul_precision_it_ran_at(tmp_path, capsys):
+  """--matmul-precision float32: set before anything is traced, said in the run line and recorded (a GPU's
+  default is TF32; docs/rl_task_design.md, "TF32 in the simulation")."""
+  import jax
+  before = jax.config.jax_default_matmul_precision
+  try:
+    out = tmp_path / "r.json"
+    assert eval_cli.main(["--task", "drop", "--policy", "zero", "--episodes", "2", "--episode-length", "3",
+                          "--matmul-precision", "float32", "--out", str(out)]) == 0
+    assert json.load(open(out))["matmul_precision"] == "float32"
+    assert ", float32 matmuls;" in capsys.readouterr().out
+  finally:
+    jax.config.update("jax_default_matmul_precision", before)
+  assert eval_cli.main(["--task", "drop", "--policy", "zero", "--episodes", "2", "--episode-length", "3",
+                        "--out", str(tmp_path / "d.json")]) == 0
+  assert json.load(open(tmp_path / "d.json"))["matmul_precision"] == "default"
+
+
 def test_batched_liquid_matches_single_env_native_path():
   """Pour Water on the batched backend: the particles, advanced over the poses each substep recorded,
   follow the single-env native path (``native.substep``: the liquid on the live MjData) while the
