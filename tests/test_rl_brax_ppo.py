@@ -541,3 +541,16 @@ def test_each_evaluation_is_scored_off_the_clock_and_gives_the_time_to_80_safe(m
   assert "scored_curve" not in R.train_one("place_plate", 2.0, 0, cfg, None, {})  # off unless asked
   with pytest.raises(ValueError, match="curve_episodes"):
     R.parse_args(["--curve-episodes", "-1"])
+
+
+def test_a_row_trained_at_float32_matmuls_says_so(tmp_path):
+  """Rows record the matmul precision they trained at (--matmul-precision or JAX_DEFAULT_MATMUL_PRECISION); the
+  table labels a float32 one, and rows written before it was recorded read as the default."""
+  import json
+  path = str(tmp_path / "p.json")
+  rows = [dict(_row(2.0, 0, 0.9), matmul_precision="float32"), _row(2.0, 1, 0.9)]
+  with open(path, "w") as f:
+    json.dump({"task": "place_plate", "task_settings": {}, "device": "NVIDIA H200", "recipe": {}, "rows": rows}, f)
+  assert R.main(["--merge", path, "--out", str(tmp_path / "m")]) == 0
+  lines = [ln for ln in (tmp_path / "m.md").read_text().splitlines() if ln.startswith("| w 2")]
+  assert len(lines) == 2 and ", float32 matmuls |" in lines[0] and "matmuls" not in lines[1]
