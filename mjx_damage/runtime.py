@@ -1,6 +1,7 @@
 """Process-wide JAX settings the package applies on import, before JAX's backends start.
 
-Two settings, each with an environment variable to change or switch it off:
+Two settings, each with an environment variable to change or switch it off (the XLA:CPU flags and the
+persistent compilation cache), and two a command opts into (deterministic GPU kernels, matmul precision):
 
 **XLA:CPU flags** (``MJX_DAMAGE_XLA_CPU_FIX=0`` to leave XLA_FLAGS alone): two, each
 added unless ``XLA_FLAGS`` already names it. Both change only the CPU compiler.
@@ -47,7 +48,7 @@ the training throughput of runs without it (``benchmarks/training_repeatability.
 "Repeatable GPU runs"). CPU runs are repeatable without it.
 
 **Matrix-product precision** (opt-in: :func:`use_matmul_precision`, the ``--matmul-precision`` option of the
-same three commands; JAX's own ``JAX_DEFAULT_MATMUL_PRECISION`` has the same effect). By default JAX computes
+same three commands and ``mjx-damage eval``; JAX's own ``JAX_DEFAULT_MATMUL_PRECISION`` has the same effect). By default JAX computes
 float32 matrix products at TF32 (a 10-bit mantissa) on recent NVIDIA GPUs and in full float32 on a CPU, so MJX on
 a GPU is, in its last bits, another simulator; a policy can learn behaviour that only TF32 makes reliable (one
 Shelve Item policy carried in 100 % of episodes at TF32 and 48 % at float32: docs/rl_task_design.md, "TF32 in
