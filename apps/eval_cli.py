@@ -78,7 +78,7 @@ def main(argv=None) -> int:
         f"fragility {args.fragility:g}, seed {args.seed}, backend {backend}"
         f"{R.auto_reason(args.backend, backend, [args.policy])}, "
         f"device {platform} x {jax.device_count()}"
-        f"{', ' + runtime.matmul_precision() + ' matmuls' if runtime.matmul_precision() != 'default' else ''}; "
+        f"{runtime.matmul_label() and ', ' + runtime.matmul_label()}; "
         f"output {out}", flush=True)
   say_compiling(COMPILE_S, platform)
   t0 = time.perf_counter()

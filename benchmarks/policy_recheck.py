@@ -56,7 +56,6 @@ import jax  # noqa: E402
 
 BACKENDS = ("mjx", "native")
 PRECISIONS = ("float32", "tf32")
-MATMUL_PRECISIONS = runtime.MATMUL_PRECISIONS  # "default": the backend's own, whatever JAX's setting outside
 
 
 def _tf32(x):
@@ -83,6 +82,14 @@ def tf32_policy(policy: E.Policy) -> E.Policy:
   return E.parametrized_policy(apply, kernels)
 
 
+def _choices(text: str, allowed: tuple, field: str) -> list[str]:
+  """A comma-separated list of ``allowed`` values, each at most once (ValueError naming ``field``)."""
+  values = [v.strip() for v in text.split(",") if v.strip()]
+  if not values or len(set(values)) != len(values) or any(v not in allowed for v in values):
+    raise ValueError(f"{field}: comma-separated of {', '.join(allowed)}, each at most once, got {','.join(values)!r}")
+  return values
+
+
 def parse(argv=None):
   p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
   p.add_argument("--task", required=True, help="registry task the policies were trained on")
@@ -101,7 +108,7 @@ def parse(argv=None):
                  help=f"comma-separated of {','.join(PRECISIONS)}, each a row: the checkpoint policies' matrix "
                       "products in full float32, or at TF32 precision as on a recent NVIDIA GPU (emulated)")
   p.add_argument("--matmul-precision", default="default",
-                 help=f"comma-separated of {','.join(MATMUL_PRECISIONS)}, each a row: every matrix product of the "
+                 help=f"comma-separated of {','.join(runtime.MATMUL_PRECISIONS)}, each a row: every matrix product of the "
                       "compiled program (physics and policy) at the backend's default precision (TF32 on a recent "
                       "NVIDIA GPU) or at full float32")
   p.add_argument("--tag", default="")
@@ -125,16 +132,8 @@ def parse(argv=None):
       raise ValueError(f"fragility: comma-separated numbers, got {fragility_text!r}") from None
     if not args.fragility:
       raise ValueError("fragility: give at least one factor")
-    args.policy_precision = [v.strip() for v in args.policy_precision.split(",") if v.strip()]
-    if (not args.policy_precision or len(set(args.policy_precision)) != len(args.policy_precision)
-            or any(v not in PRECISIONS for v in args.policy_precision)):
-      raise ValueError(f"policy_precision: comma-separated of {', '.join(PRECISIONS)}, each at most once, "
-                       f"got {','.join(args.policy_precision)!r}")
-    args.matmul_precision = [v.strip() for v in args.matmul_precision.split(",") if v.strip()]
-    if (not args.matmul_precision or len(set(args.matmul_precision)) != len(args.matmul_precision)
-            or any(v not in MATMUL_PRECISIONS for v in args.matmul_precision)):
-      raise ValueError(f"matmul_precision: comma-separated of {', '.join(MATMUL_PRECISIONS)}, each at most once, "
-                       f"got {','.join(args.matmul_precision)!r}")
+    args.policy_precision = _choices(args.policy_precision, PRECISIONS, "policy_precision")
+    args.matmul_precision = _choices(args.matmul_precision, runtime.MATMUL_PRECISIONS, "matmul_precision")
     if "tf32" in args.policy_precision:
       other = [s for s in args.policies if R.parse_policy_spec(s)[0] != "checkpoint"]
       if other:

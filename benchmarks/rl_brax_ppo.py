@@ -410,8 +410,8 @@ def _action_label(row: dict) -> str:
 
 
 def _matmul_label(row: dict) -> str:
-  precision = row.get("matmul_precision", "default")  # rows written before the flag: JAX's default
-  return "" if precision == "default" else f", {precision} matmuls"
+  label = runtime.matmul_label(row.get("matmul_precision", "default"))  # rows before the flag: the default
+  return label and ", " + label
 
 
 def _robot_named(settings: dict | None) -> dict | None:

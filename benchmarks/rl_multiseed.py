@@ -162,8 +162,8 @@ def method_spec(name: str, args) -> dict:
   if args.init_log_std is not None and spec["preset"] != "paper":  # the paper preset has its own
     spec = dict(spec, label=spec["label"] + f", init log-std {args.init_log_std[0]:g}/{args.init_log_std[1]:g}",
                 init_log_std=args.init_log_std)
-  if runtime.matmul_precision() != "default":  # --matmul-precision or JAX_DEFAULT_MATMUL_PRECISION
-    spec = dict(spec, label=spec["label"] + f", {runtime.matmul_precision()} matmuls")
+  if runtime.matmul_label():  # --matmul-precision or JAX_DEFAULT_MATMUL_PRECISION
+    spec = dict(spec, label=spec["label"] + ", " + runtime.matmul_label())
   return spec
 
 

@@ -146,7 +146,8 @@ def _brax_changes(recipe: dict) -> str:
 
 def _matmuls(row: dict) -> str:
   """Runs at another float32 matmul precision than the backend's default are other runs (docs/rl_task_design.md,
-  "TF32 in the simulation"); rows written before it was recorded ran at the default."""
+  "TF32 in the simulation"); rows written before it was recorded ran at the default. The words of
+  mjx_damage.runtime.matmul_label, not imported: this script runs without JAX."""
   precision = row.get("matmul_precision", "default")
   return "" if precision == "default" else f"{precision} matmuls"
 

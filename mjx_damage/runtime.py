@@ -196,6 +196,13 @@ def use_matmul_precision(value: str, field: str = "--matmul-precision") -> None:
   jax.config.update("jax_default_matmul_precision", None if value == "default" else value)
 
 
+def matmul_label(precision: str | None = None) -> str:
+  """How results name a matmul precision other than the default ("float32 matmuls"; "" for the default).
+  ``precision``: a recorded one, or None for the one in force (:func:`matmul_precision`)."""
+  precision = matmul_precision() if precision is None else precision
+  return "" if precision == "default" else f"{precision} matmuls"
+
+
 def flags_in_force(deterministic: bool, precision: str | None) -> str:
   """The options a training command needs to repeat this process's run beyond those it was given
   (``deterministic``: ``--deterministic`` given; ``precision``: the ``--matmul-precision`` given, or None):

@@ -5,8 +5,6 @@ the trainer table keeps runs of other precisions apart.
 
 One fresh Python process for the command lines: the option changes a process-wide JAX setting."""
 
-import contextlib
-import io
 import json
 import os
 import subprocess

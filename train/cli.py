@@ -365,7 +365,7 @@ def main(argv=None) -> int:
         f"per seed{size}, seeds {list(cfg.seeds)}, device {platform} x {len(devices)} (mesh seeds x envs "
         f"{M.shape(len(devices), cfg.num_seeds)}, {jax.process_count()} process(es)"
         f"{', deterministic GPU kernels' if runtime.deterministic_gpu_ops() and platform != 'cpu' else ''}"
-        f"{', ' + runtime.matmul_precision() + ' matmuls' if runtime.matmul_precision() != 'default' else ''}); "
+        f"{runtime.matmul_label() and ', ' + runtime.matmul_label()}); "
         f"run directory {args['out_dir']}{' (resuming)' if args['resume'] else ''}", flush=True)
   say_compiling(COMPILE_S, platform, default=90)
   try:
