@@ -1,4 +1,4 @@
-"""Which strategy does the task reward alone pay for? Scripted safe vs unsafe, by discounted task return.
+"""Which strategy does the task reward alone pay for? Scripted safe vs unsafe (and trained policies), by discounted task return.
 
 For each task (in its RL setting: Place Plate with ``obs_mode="paper"``, the
 in-hand start), N randomised episodes of each scripted policy run through ONE
@@ -28,6 +28,12 @@ penalty.
 entry (clipped): the scripted strategy as a Gaussian learner's exploration
 perturbs it, e.g. whether the careful route still avoids damage at a policy's
 initial standard deviation.
+``TASK:checkpoint[+sample|+mean]:FILE#SEED`` (a policy as ``mjx-damage eval --policy``
+names it) adds a trained policy: which of two learned strategies the task reward
+pays more for, on the same episodes. The checkpoint must have been evaluated in
+this run's settings (``--task-settings``, ``--robot``); a mismatch is refused.
+``--baseline TASK:STYLE`` (default ``safe``) is the policy every other one of
+the task is compared with, episode by episode.
 
 Writes ``benchmarks/results/reward_preference[_TAG].{json,md}`` with the command. ``--robot`` (default the
 gripper, the committed results' robot) is every task's robot; another robot writes
@@ -58,6 +64,7 @@ import numpy as np  # noqa: E402
 
 import provenance  # noqa: E402  (the sibling module: command, git, date)
 import tasks  # noqa: E402
+from apps import resolve as R  # noqa: E402
 from mjx_damage.io import write_json, write_text  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "benchmarks", "results")
@@ -103,9 +110,20 @@ def noisy_policy(policy, sigma: float):
   return act
 
 
+def is_checkpoint(style: str) -> bool:
+  """Whether a style names a trained policy (``checkpoint[+sample|+mean]:FILE#SEED``) rather than a script."""
+  return style.partition(":")[0] in R.CHECKPOINT_ACTIONS
+
+
 def make_policy(env, style: str):
   base, sigma = parse_style(style)
-  return noisy_policy(still_policy(env) if base == STILL else env.unwrapped.policy(base), sigma)
+  if base == STILL:
+    policy = still_policy(env)
+  elif is_checkpoint(base):
+    policy = R.make_policy(base, env)  # checks the checkpoint's observation and action sizes against env
+  else:
+    policy = env.unwrapped.policy(base)
+  return noisy_policy(policy, sigma)
 
 
 def trace_fn(env, policies, length: int):
@@ -165,7 +183,7 @@ def _stat(x):
 
 
 def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dict, damage_weight: float,
-             robot: str = "gripper") -> dict:
+             robot: str = "gripper", baseline: str = "safe") -> dict:
   env = tasks.make(name, robot=robot, **overrides)
   task = env.unwrapped
   length = task.episode_length
@@ -194,15 +212,16 @@ def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dic
     mean_trace = e["reward"].mean(axis=0)
     row["reward_trace_windows"] = [float(mean_trace[i:i + WINDOW].mean()) for i in range(0, length, WINDOW)]
     rows.append(row)
-  # paired comparison on the same episodes (same reset keys): unsafe − safe, per step and per return
+  # paired comparison on the same episodes (same reset keys): policy − baseline, per step and per return
+  # (the keys keep the names of the first comparison, unsafe vs safe: "unsafe" is the policy, "safe" the baseline)
   cmp = []
-  base = per["safe"]
+  base = per[baseline]
   for style in styles:
-    if style == "safe":
+    if style == baseline:
       continue
     e = per[style]
     diff = e["reward"].mean(axis=0) - base["reward"].mean(axis=0)
-    c = {"task": name, "policy": style, "vs": "safe",
+    c = {"task": name, "policy": style, "vs": baseline,
          "steps_unsafe_earns_more": int((diff > 1e-6).sum()), "steps_safe_earns_more": int((diff < -1e-6).sum()),
          "first_step_unsafe_ahead": int(np.argmax(diff > 1e-6)) + 1 if (diff > 1e-6).any() else None,
          "undiscounted_diff_mean": float((e["undiscounted"] - base["undiscounted"]).mean())}
@@ -215,7 +234,8 @@ def run_task(name: str, styles, episodes: int, gammas, seed: int, overrides: dic
       c[f"shaped_return_gamma_{g:g}_diff_mean"] = float(ds.mean())
       c[f"shaped_return_gamma_{g:g}_diff_max"] = float(ds.max())
     cmp.append(c)
-  return {"task": name, "overrides": overrides, "damage_weight": damage_weight, "styles": list(styles), "compile_s": round(compile_s, 1),
+  return {"task": name, "overrides": overrides, "damage_weight": damage_weight, "styles": list(styles), "baseline": baseline,
+          "compile_s": round(compile_s, 1),
           "run_s": round(run_s, 1), "rows": rows, "comparisons": cmp,
           "config": {k: v for k, v in tasks.default_config(name).items() if k != "params_fn"} | overrides
           | {"robot": robot}}
@@ -229,7 +249,7 @@ def _f(s, key="mean", fmt="{:.2f}"):
 def render_md(result: dict) -> str:
   gammas = result["gammas"]
   lines = [
-      "# Reward preference: scripted safe vs unsafe under the task reward alone",
+      "# Reward preference: which strategy the task reward alone pays for (scripted safe vs unsafe, and any other policy)",
       "",
       f"Command: `{result['command']}`  ",
       f"jax {result['jax']} on {result['backend']} ({result['cpu_count']} CPU cores), {result['date']}, "
@@ -254,18 +274,19 @@ def render_md(result: dict) -> str:
           f"| {r['task']} | {r['policy']} | {r['completion_pct']:.1f} | {r['safe_completion_pct']:.1f} | {rets} "
           f"| {_f(r['undiscounted_return'])} | {_f(ss, 'mean', '{:.1f}')} ({_f(ss, 'min', '{:.0f}')}–"
           f"{_f(ss, 'max', '{:.0f}')}) |")
-  lines += ["", "Paired differences (unsafe − safe, same episodes; mean, min–max over episodes):", "",
-            "| task | policy | " + " | ".join(f"Δ return γ={g:g} (episodes unsafe higher)" for g in gammas)
-            + " | Δ undiscounted | steps unsafe earns more / safe earns more | first step unsafe ahead | "
+  lines += ["", "Paired differences (policy − the policy it is compared with, `vs`; same episodes; mean, min–max "
+            "over episodes):", "",
+            "| task | policy | vs | " + " | ".join(f"Δ return γ={g:g} (episodes policy higher)" for g in gammas)
+            + " | Δ undiscounted | steps policy earns more / vs earns more | first step policy ahead | "
             + " | ".join(f"Δ return γ={g:g} with damage penalty w={result['damage_weight']:g} (max)" for g in gammas)
             + " |",
-            "|---|---|" + "---|" * len(gammas) + "---|---|---|" + "---|" * len(gammas)]
+            "|---|---|---|" + "---|" * len(gammas) + "---|---|---|" + "---|" * len(gammas)]
   for t in result["tasks"]:
     for c in t["comparisons"]:
       d = " | ".join(f"{c[f'return_gamma_{g:g}_diff_mean']:+.2f}, {c[f'return_gamma_{g:g}_diff_min']:+.2f}–"
                      f"{c[f'return_gamma_{g:g}_diff_max']:+.2f} ({c[f'return_gamma_{g:g}_unsafe_higher_pct']:.0f} %)"
                      for g in gammas)
-      lines.append(f"| {c['task']} | {c['policy']} | {d} | {c['undiscounted_diff_mean']:+.2f} "
+      lines.append(f"| {c['task']} | {c['policy']} | {c['vs']} | {d} | {c['undiscounted_diff_mean']:+.2f} "
                    f"| {c['steps_unsafe_earns_more']} / {c['steps_safe_earns_more']} | {c['first_step_unsafe_ahead']} | "
                    + " | ".join(f"{c[f'shaped_return_gamma_{g:g}_diff_mean']:+.1f} "
                                 f"({c[f'shaped_return_gamma_{g:g}_diff_max']:+.1f})" for g in gammas) + " |")
@@ -276,6 +297,11 @@ def render_md(result: dict) -> str:
       lines.append(f"- {r['task']} / {r['policy']}: {w}")
   lines += ["", "Settings per task (make() overrides): "
             + "; ".join(f"{t['task']}: {t['overrides'] or 'defaults'}" for t in result["tasks"]), ""]
+  trained = [(t["task"], s, k) for t in result["tasks"] for s, k in t.get("trained_settings", {}).items()]
+  if trained:
+    lines += ["Trained policies (each evaluated, in its run, in these settings; the same as the task's here):", ""]
+    lines += [f"- {n} / `{s}`: {json.dumps(k, sort_keys=True)}" for n, s, k in trained]
+    lines += [""]
   return "\n".join(lines)
 
 
@@ -290,7 +316,11 @@ def parse_args(argv=None):
   p.add_argument("--style", action="append", default=[],
                  help="TASK:STYLE, an extra scripted style of a task, or TASK:still (the zero action), each "
                       "optionally with +noise=SIGMA (N(0, SIGMA²) added to every action entry, e.g. "
-                      "shelve_item:safe+noise=0.3; repeatable)")
+                      "shelve_item:safe+noise=0.3), or TASK:checkpoint[+sample|+mean]:FILE#SEED, a trained policy "
+                      "(mjx-damage eval --policy's spec; repeatable)")
+  p.add_argument("--baseline", action="append", default=[], metavar="TASK:STYLE",
+                 help="the policy of TASK every other one is compared with, episode by episode (default safe; "
+                      "STYLE: safe, unsafe or one of TASK's --style values)")
   p.add_argument("--task-settings", default=None, metavar="JSON",
                  help="task keyword arguments over each task's RL setting (tasks.RL_SETTINGS), e.g. "
                       "'{\"start\": \"pregrasp\"}'; the results record them")
@@ -321,14 +351,41 @@ def parse_args(argv=None):
     raise ValueError(f"gammas: comma-separated numbers in (0, 1], got {a.gammas!r}")
   if not np.isfinite(a.damage_weight) or a.damage_weight < 0:
     raise ValueError(f"damage_weight: must be a finite number >= 0, got {a.damage_weight}")
-  a.extra = {}
+  a.extra, a.trained = {}, {}
   for s in a.style:
     t, _, style = s.partition(":")
     if t not in a.task_list or not style:
       raise ValueError(f"style: expected TASK:STYLE with TASK in {a.task_list}, got {s!r}")
-    parse_style(style)  # a bad noise suffix is refused here, before anything compiles
+    base, _ = parse_style(style)  # a bad noise suffix is refused here, before anything compiles
+    if is_checkpoint(base):
+      a.trained.setdefault(t, {})[style] = _trained_settings(t, base, a.settings[t], a.robot)
+    if style in ("safe", "unsafe") or style in a.extra.get(t, []):
+      raise ValueError(f"style: {s!r} is given twice (safe and unsafe always run)")
     a.extra.setdefault(t, []).append(style)
+  a.baselines = {}
+  for s in a.baseline:
+    t, _, style = s.partition(":")
+    if t not in a.task_list or style not in ["safe", "unsafe"] + a.extra.get(t, []):
+      raise ValueError(f"baseline: expected TASK:STYLE with TASK in {a.task_list} and STYLE safe, unsafe or one "
+                       f"of the task's --style values, got {s!r}")
+    if t in a.baselines:
+      raise ValueError(f"baseline: one per task; {t} has {a.baselines[t]!r} and {style!r}")
+    a.baselines[t] = style
   return a
+
+
+def _trained_settings(task: str, spec: str, settings: dict, robot: str) -> dict:
+  """The settings a checkpoint style's run evaluated it in (``apps.resolve.checkpoint_task_kwargs``), refused
+  (ValueError naming the keys) unless they are this run's: the reward is compared on the same task."""
+  R.parse_policy_spec(spec)  # the file exists; the seed is one of its run's
+  trained = R.checkpoint_task_kwargs(spec, task)  # its task is this task
+  mine, default = dict(settings, robot=robot), tasks.default_config(task)
+  differ = sorted(k for k in set(trained) | set(mine) if trained.get(k, default.get(k)) != mine.get(k, default.get(k)))
+  if differ:
+    raise ValueError(f"style: checkpoint {spec!r} was evaluated with "
+                     f"{ {k: trained.get(k, default.get(k)) for k in differ} }, this run has "
+                     f"{ {k: mine.get(k, default.get(k)) for k in differ} } (give them with --task-settings or --robot)")
+  return trained
 
 
 def main(argv=None) -> int:
@@ -343,10 +400,13 @@ def main(argv=None) -> int:
   stem = os.path.join(a.out_dir, "reward_preference" + robot + (f"_{a.tag}" if a.tag else ""))
   for n in a.task_list:
     styles = ["safe", "unsafe"] + a.extra.get(n, [])
-    t = run_task(n, styles, a.episodes, a.gamma_list, a.seed, a.settings[n], a.damage_weight, a.robot)
+    t = run_task(n, styles, a.episodes, a.gamma_list, a.seed, a.settings[n], a.damage_weight, a.robot,
+                 a.baselines.get(n, "safe"))
+    if a.trained.get(n):
+      t["trained_settings"] = a.trained[n]
     result["tasks"].append(t)
     for c in t["comparisons"]:
-      print(f"{n} {c['policy']} - safe: " + ", ".join(
+      print(f"{n} {c['policy']} - {c['vs']}: " + ", ".join(
           f"γ={g:g} {c[f'return_gamma_{g:g}_diff_mean']:+.2f}" for g in a.gamma_list), flush=True)
     write_json(stem + ".json", result)  # partial results survive an interrupted run
     write_text(stem + ".md", render_md(result))
