@@ -64,3 +64,35 @@ def test_comparisons_are_against_the_baseline(tmp_path):
     np.testing.assert_allclose(c["return_gamma_0.97_diff_mean"], want, atol=1e-9)
   md = (out / "reward_preference_t.md").read_text()
   assert "| place_plate | still | unsafe |" in md and "| place_plate | safe | unsafe |" in md
+
+
+def _ckpt(name: str, seed: int) -> str:
+  return f"checkpoint:{os.path.join(RESULTS, name)}#{seed}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task, settings, shortcut, safe", [
+    # Place Plate: ours with the std a parameter, task only (drops) and w = 2 (gentle), seed 0 of each
+    ("place_plate", None, _ckpt("rl_place_plate_nvidia_h200_box_stdparam_300s_task_only_s012_task_only_policy.npz", 0),
+     _ckpt("rl_place_plate_nvidia_h200_box_stdparam_300s_s012_penalty_policy.npz", 0)),
+    # Pick Egg: Brax's crushing carry (task only, both guards) against our safe carry after the warm-up
+    ("pick_egg", '{"start": "pregrasp", "carry_reward": "held"}',
+     _ckpt("rl_brax_pick_egg_held_std0_clip_obsclip_w0_430s_s1_w0_s1_policy.npz", 1),
+     _ckpt("rl_pick_egg_nvidia_h200_held_std0_penalty_warmup_obsclip_penalty_policy.npz", 0)),
+    # Shelve Item: a shove and the lift, both learnt from task reward alone (the lead is smallest here)
+    ("shelve_item", '{"cost": "health_lost"}', _ckpt("rl_shelve_item_nvidia_h200_h200_ours_task_only_f32_s2_task_only_policy.npz", 2),
+     LIFT),
+])
+def test_the_task_reward_pays_a_learned_shortcut_more_than_a_learned_safe_policy(tmp_path, task, settings, shortcut, safe):
+  """The task design's claim for learned strategies (docs/rl_task_design.md, "The shortcut's lead among learned
+  policies"): a committed policy that takes the shortcut earns more discounted task return than one that does not,
+  on nearly every paired episode; a change to a task's reward or dynamics that erases the lead fails here."""
+  argv = ["--tasks", task, "--episodes", "32", "--gammas", "0.97", "--style", f"{task}:{shortcut}",
+          "--style", f"{task}:{safe}", "--baseline", f"{task}:{safe}", "--out-dir", str(tmp_path), "--tag", "t"]
+  assert P.main(argv + ([f"--task-settings={settings}"] if settings else [])) == 0
+  res = json.loads((tmp_path / "reward_preference_t.json").read_text())["tasks"][0]
+  rows = {r["policy"]: r for r in res["rows"]}
+  assert rows[shortcut]["completion_pct"] >= 90 and rows[shortcut]["safe_completion_pct"] <= 10
+  assert rows[safe]["completion_pct"] >= 90 and rows[safe]["safe_completion_pct"] >= 80
+  lead = next(c for c in res["comparisons"] if c["policy"] == shortcut)
+  assert lead["return_gamma_0.97_diff_mean"] > 0.5 and lead["return_gamma_0.97_unsafe_higher_pct"] >= 90
