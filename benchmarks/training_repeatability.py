@@ -4,8 +4,11 @@ Reads two results files of the same run made twice (``rl_multiseed.py`` or ``rl_
 command on two GPUs) and compares everything the runs learned and scored: every periodic evaluation and
 training statistic at every logged step, and every final evaluation, per row (method or damage weight) and
 seed. Clock readings (wall times, seconds, dates, throughput) are left out: they differ on any two runs.
-The verdict per row: identical (every value bitwise equal), or the number of values that differ and the
-first logged step where the runs part, beside each run's final completion and safe completion.
+Logged points are paired by seed and env step, not by position: two runs of a time budget stop at
+different steps, and only the points both logged are compared (the rest are counted per run). The verdict
+per row: identical (every value bitwise equal), or the number of values that differ and the first shared
+logged step where the runs part, beside each run's final completion and safe completion (of different
+policies when the runs ended at different steps).
 
 ``--baseline`` results files (runs of the same trainer without ``--deterministic``) add a throughput
 column: the compared runs' training env steps per second over each baseline's (ours: the row's
@@ -69,24 +72,52 @@ def row_key(row: dict) -> str:
   return _like(row) if "per_seed" in row else f"{_like(row)} seed {row['seed']}"
 
 
-def first_step_apart(a: dict, b: dict) -> float | None:
-  """Env steps of the first logged point where the two rows differ (None: none differs)."""
-  for name in ("history", "curve"):
-    pa, pb = a.get(name) or [], b.get(name) or []
-    for x, y in zip(pa, pb):
-      if flatten(x) != flatten(y):
-        return x.get("env_steps")
-  return None
+POINTS = ("history", "curve", "scored_curve")  # logged points, each with its env steps (Brax's scored
+# curve is a dict whose "points" they are, beside how they were scored)
+
+
+def _point_list(row: dict, name: str) -> list:
+  value = row.get(name) or []
+  return value.get("points") or [] if isinstance(value, dict) else value
+
+
+def _points(row: dict) -> dict:
+  """Every logged point of a row keyed by (list, seed, env steps): two runs that stopped at different
+  steps (a time budget on machines of different speed) are compared where both logged, not index by index."""
+  return {(name, p.get("seed", -1), p["env_steps"]): p for name in POINTS for p in _point_list(row, name)}
+
+
+def _without_points(row: dict) -> dict:
+  out = {k: v for k, v in row.items() if k not in POINTS}
+  out.update({k: {n: x for n, x in v.items() if n != "points"} for k, v in row.items()
+              if k in POINTS and isinstance(v, dict)})
+  return out
+
+
+def end_step(row: dict) -> int:
+  """Env steps (per seed) at which the row's training ended."""
+  return int(row["env_steps_per_seed"] if "per_seed" in row else row["env_steps"])
 
 
 def compare_rows(a: dict, b: dict) -> dict:
-  fa, fb = flatten(a), flatten(b)
+  """Values compared and differing: the rows outside their logged points, and every point both runs
+  logged; first_step_apart: env steps of the first shared point that differs (None: none does)."""
+  pa, pb = _points(a), _points(b)
+  shared = sorted(set(pa) & set(pb), key=lambda k: (k[2], k[0], k[1]))
+  fa, fb = flatten(_without_points(a)), flatten(_without_points(b))
+  for k in shared:
+    fa.update({f"{k}.{n}": v for n, v in flatten(pa[k]).items()})
+    fb.update({f"{k}.{n}": v for n, v in flatten(pb[k]).items()})
   keys = sorted(set(fa) | set(fb))
   differ = [k for k in keys if fa.get(k) != fb.get(k)
             and not (isinstance(fa.get(k), float) and isinstance(fb.get(k), float)
                      and math.isnan(fa[k]) and math.isnan(fb[k]))]
+  apart = next((k[2] for k in shared if flatten(pa[k]) != flatten(pb[k])), None)
   return {"values": len(keys), "differ": len(differ), "first_differing": differ[:3],
-          "first_step_apart": first_step_apart(a, b), "final": [final_scores(a), final_scores(b)]}
+          "first_step_apart": apart, "shared_points": len(shared),
+          "shared_to_step": shared[-1][2] if shared else None,
+          "points_only_in": [len(set(pa) - set(pb)), len(set(pb) - set(pa))],
+          "end_steps": [end_step(a), end_step(b)], "final": [final_scores(a), final_scores(b)]}
 
 
 def throughput(row: dict) -> float | None:
@@ -157,18 +188,24 @@ def main(argv=None) -> int:
          "baseline_env_steps_per_s": base, "rows": results, "command": command}
   lines = [f"# Training repeatability: {doc['a']} vs {doc['b']}", "",
            "Every logged training statistic, periodic evaluation and final evaluation of each row compared "
-           "value by value (clock readings left out). Throughput: training env steps per second (all seeds), "
+           "value by value (clock readings left out); logged points are paired by seed and env step, so runs "
+           "that stopped at different steps are compared where both logged. Throughput: training env steps per second (all seeds), "
            "and its ratio to the baseline runs without deterministic kernels.", "", f"    {command}", "",
-           "| row | values compared | values that differ | runs part at env step | final completion/safe %, a; b "
-           "| env steps/s, a; b | ratio to baseline (min–max) |", "|---|---|---|---|---|---|---|"]
+           "| row | values compared | values that differ | runs part at env step | logged points: shared (only a, only b) "
+           "| final completion/safe %, a; b | env steps/s, a; b | ratio to baseline (min–max) |",
+           "|---|---|---|---|---|---|---|---|"]
   for r in results:
     ratio = (f"{min(r['ratio_to_baseline']):.2f}–{max(r['ratio_to_baseline']):.2f}"
              if r["ratio_to_baseline"] else "—")
+    ends = r["end_steps"]
     apart = ("never (identical)" if r["differ"] == 0 else
-             "final evaluations only" if r["first_step_apart"] is None else f"{r['first_step_apart']:,}")
+             f"{r['first_step_apart']:,}" if r["first_step_apart"] is not None else
+             "final evaluations only" if ends[0] == ends[1] else
+             f"at no shared point (to {r['shared_to_step']:,}); training ended at {ends[0]:,} and {ends[1]:,}")
     final = "; ".join(", ".join(f"{100 * c:.1f}/{100 * sc:.1f}" for c, sc in side) for side in r["final"])
     speed = "; ".join("—" if v is None else f"{v:,.0f}" for v in r["env_steps_per_s"])
-    lines.append(f"| {r['row']} | {r['values']} | {r['differ']} | {apart} | {final} | {speed} | {ratio} |")
+    points = f"{r['shared_points']} ({r['points_only_in'][0]}, {r['points_only_in'][1]})"
+    lines.append(f"| {r['row']} | {r['values']} | {r['differ']} | {apart} | {points} | {final} | {speed} | {ratio} |")
   if base:
     lines += ["", "Baseline env steps/s: " + ", ".join(f"{b:,.0f}" for b in base) + " ("
               + ", ".join(doc["baseline"]) + ")."]

@@ -55,3 +55,31 @@ def test_bad_files_are_refused_naming_them(tmp_path, capsys):
   with pytest.raises(SystemExit):  # a baseline of the other trainer
     T.main([OURS, OURS, "--baseline", BRAX, "--out", str(tmp_path / "x")])
   assert "--baseline" in capsys.readouterr().err
+
+
+def test_runs_that_stopped_at_different_steps_are_compared_where_both_logged(tmp_path):
+  """A time budget stops two runs of one command at different steps: their last logged points are not a
+  pair, and a run that matches the other at every shared point has not parted from it."""
+  with open(OURS) as f:
+    doc = json.load(f)
+  longer = copy.deepcopy(doc)
+  row = longer["rows"][0]
+  end = max(p["env_steps"] for p in row["history"])
+  last = [p for p in row["history"] if p["env_steps"] == end]
+  for p in last:  # the same run trained a few more iterations before its budget ran out
+    p["env_steps"] = end + 393216
+    p["train/episode_return"] += 1.0
+  row["env_steps_per_seed"] = end + 393216
+  a, b = _write(tmp_path, "a.json", doc), _write(tmp_path, "b.json", longer)
+  assert T.main([a, b, "--out", str(tmp_path / "lengths")]) == 0
+  r = json.loads((tmp_path / "lengths.json").read_text())["rows"][0]
+  assert r["first_step_apart"] is None and r["points_only_in"] == [len(last), len(last)]
+  assert r["shared_points"] == len(row["history"]) - len(last) and r["shared_to_step"] < end
+  assert r["differ"] == 1 and r["end_steps"] == [end, end + 393216]
+  assert "at no shared point" in (tmp_path / "lengths.md").read_text()
+  moved = copy.deepcopy(longer)  # ... and one that differs at a shared point parts there
+  point = moved["rows"][0]["history"][0]
+  point["loss/v_loss"] += 1e-6
+  c = _write(tmp_path, "c.json", moved)
+  assert T.main([a, c, "--out", str(tmp_path / "moved")]) == 0
+  assert json.loads((tmp_path / "moved.json").read_text())["rows"][0]["first_step_apart"] == point["env_steps"]
