@@ -274,7 +274,8 @@ def parse(argv):
                       "so two calls at once never share a run)")
   p.add_argument("--resume", action="store_true",
                  help="continue each method's run in --work-dir from its checkpoint for another --budget-seconds "
-                      "(a run longer than one device call); the row lists every call's command")
+                      "(a run longer than one device call); the row lists every call's command. Refused when "
+                      "--work-dir holds none of the methods' runs; a method without its folder starts afresh")
   p.add_argument("--deterministic", action="store_true",
                  help="deterministic XLA GPU kernels: a rerun of a command repeats it bit for bit, at 0.73–0.76× the "
                       "throughput on an H200 (mjx_damage.runtime); CPU runs repeat without it")
@@ -403,6 +404,10 @@ def parse(argv):
               f"({len(args.seeds)})")
   if args.resume and not args.work_dir:
     p.error("--resume: give --work-dir, the folder of the runs to continue")
+  if args.resume and not any(outputs.exists(os.path.join(args.work_dir, name)) for name in args.methods):
+    # a wrong or lost --work-dir would otherwise train every method again from the start, a whole call's time
+    p.error(f"--resume: {args.work_dir} holds no run of {', '.join(args.methods)} to continue (drop --resume "
+            "to start them there); a method whose folder is missing while another's is there starts afresh")
   if args.work_dir and not args.resume:
     for name in args.methods:
       if outputs.exists(os.path.join(args.work_dir, name)):

@@ -194,6 +194,18 @@ def test_a_run_already_in_work_dir_is_refused_without_resume(tmp_path, capsys):
   assert rl_multiseed.parse(["--methods", "penalty", "--work-dir", str(tmp_path), "--resume"]).resume
 
 
+def test_resume_of_a_work_dir_without_the_runs_is_refused(tmp_path, capsys):
+  """--resume in a folder that holds none of the methods' runs (a mistyped path, a machine that did not keep
+  it) once trained them all again from the start; now it is refused before anything compiles."""
+  for work in (tmp_path / "missing", tmp_path):
+    with pytest.raises(SystemExit):
+      rl_multiseed.parse(["--methods", "penalty,pid", "--work-dir", str(work), "--resume"])
+    assert f"--resume: {work} holds no run of penalty, pid" in capsys.readouterr().err
+  (tmp_path / "pid").mkdir()
+  (tmp_path / "pid" / "metrics.jsonl").write_text("")  # one method's run is there: the other starts afresh
+  assert rl_multiseed.parse(["--methods", "penalty,pid", "--work-dir", str(tmp_path), "--resume"]).resume
+
+
 def test_calls_without_work_dir_never_share_run_directories(monkeypatch, tmp_path):
   """Two calls at once (say one per GPU) once shared /tmp/rl_multiseed/<task>_<device>: the second
   overwrote the first's checkpoints before it was scored."""
