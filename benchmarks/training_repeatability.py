@@ -189,19 +189,21 @@ def main(argv=None) -> int:
   lines = [f"# Training repeatability: {doc['a']} vs {doc['b']}", "",
            "Every logged training statistic, periodic evaluation and final evaluation of each row compared "
            "value by value (clock readings left out); logged points are paired by seed and env step, so runs "
-           "that stopped at different steps are compared where both logged. Throughput: training env steps per second (all seeds), "
-           "and its ratio to the baseline runs without deterministic kernels.", "", f"    {command}", "",
-           "| row | values compared | values that differ | runs part at env step | logged points: shared (only a, only b) "
-           "| final completion/safe %, a; b | env steps/s, a; b | ratio to baseline (min–max) |",
+           "that stopped at different steps are compared where both logged. Throughput: training env steps per "
+           "second (all seeds), and its ratio to the baseline runs without deterministic kernels.", "",
+           f"    {command}", "",
+           "| row | values compared | values that differ | runs part at env step "
+           "| logged points: shared (only a, only b) | final completion/safe %, a; b | env steps/s, a; b | ratio to baseline (min–max) |",
            "|---|---|---|---|---|---|---|---|"]
   for r in results:
     ratio = (f"{min(r['ratio_to_baseline']):.2f}–{max(r['ratio_to_baseline']):.2f}"
              if r["ratio_to_baseline"] else "—")
     ends = r["end_steps"]
+    shared_to = "" if r["shared_to_step"] is None else f" (to {r['shared_to_step']:,})"
     apart = ("never (identical)" if r["differ"] == 0 else
              f"{r['first_step_apart']:,}" if r["first_step_apart"] is not None else
              "final evaluations only" if ends[0] == ends[1] else
-             f"at no shared point (to {r['shared_to_step']:,}); training ended at {ends[0]:,} and {ends[1]:,}")
+             f"at no shared point{shared_to}; training ended at {ends[0]:,} and {ends[1]:,}")
     final = "; ".join(", ".join(f"{100 * c:.1f}/{100 * sc:.1f}" for c, sc in side) for side in r["final"])
     speed = "; ".join("—" if v is None else f"{v:,.0f}" for v in r["env_steps_per_s"])
     points = f"{r['shared_points']} ({r['points_only_in'][0]}, {r['points_only_in'][1]})"

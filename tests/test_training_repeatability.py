@@ -83,3 +83,11 @@ def test_runs_that_stopped_at_different_steps_are_compared_where_both_logged(tmp
   c = _write(tmp_path, "c.json", moved)
   assert T.main([a, c, "--out", str(tmp_path / "moved")]) == 0
   assert json.loads((tmp_path / "moved.json").read_text())["rows"][0]["first_step_apart"] == point["env_steps"]
+  apart_all = copy.deepcopy(doc)  # no step in common (another eval interval): nothing to pair, no crash
+  for p in apart_all["rows"][0]["history"]:
+    p["env_steps"] += 1
+  apart_all["rows"][0]["env_steps_per_seed"] += 1
+  d = _write(tmp_path, "d.json", apart_all)
+  assert T.main([a, d, "--out", str(tmp_path / "none")]) == 0
+  r = json.loads((tmp_path / "none.json").read_text())["rows"][0]
+  assert r["shared_points"] == 0 and r["shared_to_step"] is None and r["first_step_apart"] is None
