@@ -78,7 +78,7 @@ POINTS = ("history", "curve", "scored_curve")  # logged points, each with its en
 
 def _point_list(row: dict, name: str) -> list:
   value = row.get(name) or []
-  return value.get("points") or [] if isinstance(value, dict) else value
+  return (value.get("points") or []) if isinstance(value, dict) else value
 
 
 def _points(row: dict) -> dict:
@@ -105,14 +105,15 @@ def compare_rows(a: dict, b: dict) -> dict:
   pa, pb = _points(a), _points(b)
   shared = sorted(set(pa) & set(pb), key=lambda k: (k[2], k[0], k[1]))
   fa, fb = flatten(_without_points(a)), flatten(_without_points(b))
+  point_a, point_b = {k: flatten(pa[k]) for k in shared}, {k: flatten(pb[k]) for k in shared}
   for k in shared:
-    fa.update({f"{k}.{n}": v for n, v in flatten(pa[k]).items()})
-    fb.update({f"{k}.{n}": v for n, v in flatten(pb[k]).items()})
+    fa.update({f"{k}.{n}": v for n, v in point_a[k].items()})
+    fb.update({f"{k}.{n}": v for n, v in point_b[k].items()})
   keys = sorted(set(fa) | set(fb))
   differ = [k for k in keys if fa.get(k) != fb.get(k)
             and not (isinstance(fa.get(k), float) and isinstance(fb.get(k), float)
                      and math.isnan(fa[k]) and math.isnan(fb[k]))]
-  apart = next((k[2] for k in shared if flatten(pa[k]) != flatten(pb[k])), None)
+  apart = next((k[2] for k in shared if point_a[k] != point_b[k]), None)
   return {"values": len(keys), "differ": len(differ), "first_differing": differ[:3],
           "first_step_apart": apart, "shared_points": len(shared),
           "shared_to_step": shared[-1][2] if shared else None,
