@@ -41,11 +41,12 @@ one GPU per call::
 
 The paper's PPO settings (issue 24's third trainer: the paper's ≈ 195 updates of 512-step rollouts,
 here 256 envs per seed) run longer than one device call, so the run lives in --work-dir and each later
-call continues it with --resume (the row lists every call; the checkpoint, 23 MB for 3 seeds, must be on the
+call continues it with --resume (the row lists every call; the checkpoint, 46 MB for 3 seeds, must be on the
 machine that continues). One reward alone on an H200 trains 58–65 k env steps/s over its 3 seeds, ≈ 1,300 s
 for the 195 updates; two such processes sharing one GPU ran 22 k each, so give each its own GPU or call.
 Task reward alone ran its whole 195 updates in three such calls on one warm H200 (66, 73 and 56 updates;
-a work folder under the ignored runs/ is what such a machine keeps between calls)::
+a work folder under the ignored runs/ is what such a machine keeps between calls; a machine released
+between calls comes back without it, and --resume then refuses, before anything compiles)::
 
     P="--work-dir runs/rl_paper --paper-timesteps 25559040 --eval-actions sample,mode --seeds 0,1,2 --budget-seconds 490"
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --tag paper_task_only --results-dir $OUT
