@@ -60,8 +60,7 @@ def train_config(n: int, episode_length: int) -> PPOConfig:
 def train_program_bytes(env, n: int) -> tuple[int, PPOConfig, Trainer]:
   cfg = train_config(n, 20)
   trainer = Trainer(env, cfg)
-  init = jax.vmap(trainer.init_state)
-  ts = jax.eval_shape(init, jnp.zeros((1,), jnp.int32))
+  ts = jax.eval_shape(trainer.init_states, jnp.zeros((1,), jnp.int32))
   fn = jax.jit(jax.vmap(trainer.train_iteration), donate_argnums=0)
   return total_bytes(fn.lower(ts).compile()), cfg, trainer
 

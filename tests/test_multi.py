@@ -97,7 +97,7 @@ def test_one_device_mesh_equals_the_single_device_program():
   mesh = M.make_mesh(jax.devices()[:1], cfg.num_seeds)
   assert M.axis_name(mesh) is None  # one env shard: no collectives, no folded keys
   trainer = Trainer(env, cfg, M.axis_name(mesh))
-  init = jax.vmap(trainer.init_state)
+  init = trainer.init_states
   seeds = np.asarray(cfg.seeds, np.int32)
   specs = M.state_specs(jax.eval_shape(init, seeds))
   plain = jax.jit(jax.vmap(trainer.train_iteration))  # the run loop's program before the mesh

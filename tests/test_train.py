@@ -149,6 +149,29 @@ def test_train_evaluate_is_the_module():
   assert callable(train.evaluate.evaluate) and train.evaluate_policy is train.task_eval.evaluate_policy
 
 
+def test_a_damage_weight_per_seed_trains_each_run_as_alone(env, tmp_path):
+  """``damage_weight`` one per seed: each run of the program trains as that seed alone with its own w (the
+  contrast's two rewards in one program); its rows log its w, config.json keeps the tuple, and a resume
+  with other weights is refused naming the field."""
+  kw = dict(num_timesteps=3 * ITER, **TINY)
+  out = str(tmp_path / "run")
+  both = train.train(env, seeds=SEEDS, damage_weight=(0.0, 2.0), eval_every=ITER, out_dir=out, **kw)
+  assert both.config.damage_weights == (0.0, 2.0)
+  assert {(r["seed"], r["damage_weight"]) for r in _rows(out)} == {(3, 0.0), (4, 2.0)}
+  for i, (s, w) in enumerate(zip(SEEDS, (0.0, 2.0))):
+    alone = train.train(env, seed=s, damage_weight=w, **kw)
+    _assert_trees_close(both.seed_state(i).params, alone.seed_state(0).params, rtol=2e-4, atol=1e-5)
+  other = train.train(env, seed=4, damage_weight=0.0, **kw)  # w matters here: seed 4 at w = 0 learns otherwise
+  assert not all(np.allclose(x, y) for x, y in zip(jax.tree.leaves(both.seed_state(1).params),
+                                                    jax.tree.leaves(other.seed_state(0).params)))
+  with open(os.path.join(out, "config.json")) as f:
+    assert json.load(f)["config"]["damage_weight"] == [0.0, 2.0]
+  with pytest.raises(ValueError, match=r"^resume: .*\(damage_weight\)"):
+    train.train(env, seeds=SEEDS, damage_weight=(2.0, 0.0), out_dir=out, resume=True, **kw)
+  cfg = train.PPOConfig.preset("paper", seeds=(0, 1), damage_weight=(0.0, 2.0)).validate()
+  assert train.PPOConfig.from_json(json.loads(json.dumps(cfg.to_json()))) == cfg
+
+
 def test_resume_of_a_multi_seed_run_equals_uninterrupted(smoke, env, tmp_path):
   out = str(tmp_path / "resumed")
   kw = dict(seeds=SEEDS, budget=0.0, lagrange_lr=0.01, eval_every=4 * ITER, checkpoint_every=4 * ITER,
@@ -382,6 +405,12 @@ def test_a_run_warns_once_when_its_normalised_inputs_pass_the_usual_clip_unless_
     (dict(num_envs=12, num_minibatches=8, batch_size=None), "num_envs"),
     (dict(num_envs=16, num_minibatches=2, batch_size=12), "num_envs"),
     (dict(damage_weight=-2.0), "damage_weight"),
+    (dict(seeds=(0, 1), damage_weight=(0.0,)), "damage_weight"),
+    (dict(seeds=(0, 1), damage_weight=(0.0, float("nan"))), "damage_weight"),
+    (dict(seeds=(0, 1), damage_weight=(0.0, -1.0)), "damage_weight"),
+    (dict(seeds=(0, 1), damage_weight=(0.0, True)), "damage_weight"),
+    (dict(seeds=(0, 0), damage_weight=(0.0, 2.0)), "seeds: .*runs are named by their seed"),
+    (dict(seeds=(0, 1), damage_weight=(0.0, 0.0), damage_warmup_steps=100), "damage_warmup_steps"),
     (dict(learning_rate=0.0), "learning_rate"),
     (dict(obs_clip=0.0), "obs_clip"),
     (dict(obs_clip=float("nan")), "obs_clip"),
@@ -448,6 +477,15 @@ def test_cli_errors_and_flags(capsys):
   assert args["seeds"] == (0, 1, 2) and args["preset"] == "paper"
   assert config == {"multiplier": "pid", "init_log_std": (-0.5, -1.5), "num_timesteps": 1_000_000,
                     "anneal_entropy": True, "redraw_starts_steps": 327680}
+  for text, w in (("2", 2.0), ("0,2", (0.0, 2.0)), ("1.5,", (1.5,))):
+    _, config = cli.split_args(vars(cli.build_parser().parse_args(["--task", "t", "--damage-weight", text])))
+    assert config == {"damage_weight": w}
+  with pytest.raises(SystemExit):
+    cli.build_parser().parse_args(["--task", "t", "--damage-weight", "0,two"])
+  assert "--damage-weight: comma-separated numbers" in capsys.readouterr().err
+  assert cli.main(["--task", "train.experiments.pusher:PusherEnv", "--out", "/tmp/x", "--seeds", "0,1",
+                   "--damage-weight", "0,2,2", "--no-progress"]) == 2
+  assert "damage_weight: one finite number >= 0, or one per seed (2 for seeds [0, 1])" in capsys.readouterr().err
   _, config = cli.split_args(vars(cli.build_parser().parse_args(["--task", "t", "--max-grad-norm", "none"])))
   assert config == {"max_grad_norm": None}  # brax's default: no clipping (not "the preset's")
   assert train.PPOConfig.preset("playground", **config).validate().max_grad_norm is None

@@ -74,6 +74,14 @@ def _floats(text: str) -> tuple[float, ...]:
     raise argparse.ArgumentTypeError(f"comma-separated numbers, got {text!r}") from None
 
 
+def _weights(text: str) -> float | tuple[float, ...]:
+  """One damage weight, or one per seed (comma-separated)."""
+  w = _floats(text)
+  if not w:
+    raise argparse.ArgumentTypeError(f"a number, or one per seed comma-separated, got {text!r}")
+  return w[0] if len(w) == 1 and "," not in text else w
+
+
 def _float_or_none(text: str) -> float | None:
   """A number, or ``none`` (e.g. no gradient clipping: brax's ``ppo.train`` default)."""
   if text.lower() == "none":
@@ -94,7 +102,9 @@ def _bool(text: str) -> bool:
 
 # (flag, PPOConfig field, type, help). Left out → the preset's value.
 CONFIG_FLAGS = (
-    ("--damage-weight", "damage_weight", float, "w in r = (r_task − (w + λ)·cost)/(1 + λ); λ = 0 without --budget"),
+    ("--damage-weight", "damage_weight", _weights, "w in r = (r_task − (w + λ)·cost)/(1 + λ); λ = 0 without "
+     "--budget. One per seed, comma-separated, trains runs of different w in one program: --seeds 0,1,2,3 "
+     "--damage-weight 0,0,2,2"),
     ("--damage-warmup-steps", "damage_warmup_steps", _int,
      "penalty schedule: w = 0 (task reward alone) for this many env steps per seed, then --damage-weight"),
     ("--damage-ramp-steps", "damage_ramp_steps", _int,
@@ -377,7 +387,8 @@ def main(argv=None) -> int:
     print(f"{p.prog}: {' '.join(str(e).split())}", file=sys.stderr)
     return 1
   summary = {
-      "out_dir": result.out_dir, "seeds": list(result.config.seeds), "env_steps_per_seed": result.env_steps,
+      "out_dir": result.out_dir, "seeds": list(result.config.seeds),
+      "damage_weights": list(result.config.damage_weights), "env_steps_per_seed": result.env_steps,
       "wall_time_s": round(result.wall_time, 1), "train_throughput_steps_per_s": round(result.throughput, 1),
       "devices": result.devices, "process": jax.process_index(),
       "final_eval": {str(s): ev for s, ev in zip(result.config.seeds, result.final_evals)},

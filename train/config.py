@@ -117,7 +117,9 @@ class PPOConfig:
   # moved the policy 0.9–24 nats from the rollout's logits before any step
   # (benchmarks/results/paper_preset_sgd_steps_cpu.md), leaving the clipped ratio little to learn from.
   normalizer_after_update: bool = False
-  damage_weight: float = 0.0
+  # w: one number for every seed, or one per seed (a sequence as long as ``seeds``), so the rewards of a
+  # contrast (task reward alone, w = 0, beside w = 2) train as runs of one program, as seeds do.
+  damage_weight: float | tuple[float, ...] = 0.0
   # Penalty schedule: w is 0 (task reward alone) for the first ``damage_warmup_steps`` env steps per seed,
   # then rises linearly to ``damage_weight`` over ``damage_ramp_steps`` (0: at once). Why: where the unsafe
   # shortcut is what the dense reward leads to and the safe strategy is reached only through it (Shelve
@@ -196,6 +198,12 @@ class PPOConfig:
     return len(self.seeds)
 
   @property
+  def damage_weights(self) -> tuple[float, ...]:
+    """w of each seed's run, in the order of ``seeds``."""
+    w = self.damage_weight
+    return tuple(float(x) for x in w) if isinstance(w, (tuple, list)) else (float(w),) * self.num_seeds
+
+  @property
   def minibatch_sequences(self) -> int:
     return self.batch_size if self.batch_size is not None else self.num_envs // self.num_minibatches
 
@@ -260,7 +268,9 @@ class PPOConfig:
     s = self.seeds
     if (not isinstance(s, (tuple, list)) or not s or any(not is_int(x) or x < 0 for x in s)
         or len(set(s)) != len(s)):
-      raise ValueError(f"seeds: a non-empty sequence of distinct integers >= 0, got {s!r}")
+      hint = (" (runs are named by their seed: give the runs of each damage weight their own seeds, e.g. "
+              "--seeds 0,1,2,3 --damage-weight 0,0,2,2)" if isinstance(self.damage_weight, (tuple, list)) else "")
+      raise ValueError(f"seeds: a non-empty sequence of distinct integers >= 0, got {s!r}{hint}")
     number("learning_rate", lo=0, lo_open=True)
     number("clipping_epsilon", lo=0, lo_open=True)
     number("discounting", lo=0, hi=1)
@@ -277,15 +287,23 @@ class PPOConfig:
       raise ValueError(f"policy_std: one of {', '.join(POLICY_STDS)}, got {self.policy_std!r}")
     if self.target_kl_rule not in TARGET_KL_RULES:
       raise ValueError(f"target_kl_rule: one of {', '.join(TARGET_KL_RULES)}, got {self.target_kl_rule!r}")
-    number("damage_weight", lo=0)
+    w = self.damage_weight
+    if isinstance(w, (tuple, list)):
+      if len(w) != len(s) or any(isinstance(x, bool) or not isinstance(x, (int, float, np.number))
+                                 or not math.isfinite(x) or x < 0 for x in w):
+        raise ValueError(f"damage_weight: one finite number >= 0, or one per seed ({len(s)} for seeds "
+                         f"{list(s)}), got {w!r}")
+    else:
+      number("damage_weight", lo=0)
+    penalised = max(self.damage_weights) > 0  # a schedule of w = 0 runs leaves them at 0
     for name in ("damage_warmup_steps", "damage_ramp_steps"):
       v = getattr(self, name)
       if not is_int(v) or v < 0:
         raise ValueError(f"{name}: must be an integer >= 0 (env steps per seed), got {v!r}")
-      if v and not self.damage_weight > 0:
+      if v and not penalised:
         raise ValueError(f"{name}: schedules the damage weight; set damage_weight > 0 too (got {self.damage_weight!r})")
     number("damage_warmup_completion", lo=0, hi=1)
-    if self.damage_warmup_completion and not self.damage_weight > 0:
+    if self.damage_warmup_completion and not penalised:
       raise ValueError("damage_warmup_completion: gates the damage weight's schedule; set damage_weight > 0 too "
                        f"(got {self.damage_weight!r})")
     number("budget", lo=0, allow_none=True)
@@ -315,8 +333,9 @@ class PPOConfig:
 
   def to_json(self) -> dict:
     d = dataclasses.asdict(self)
-    for k in ("policy_hidden_sizes", "value_hidden_sizes", "seeds", "init_log_std"):
-      d[k] = None if d[k] is None else list(d[k])
+    for k in ("policy_hidden_sizes", "value_hidden_sizes", "seeds", "init_log_std", "damage_weight"):
+      if isinstance(d[k], (tuple, list)):
+        d[k] = list(d[k])
     return d
 
   @classmethod
@@ -324,8 +343,8 @@ class PPOConfig:
     d = dict(d)
     if "seeds" not in d and "seed" in d:  # checkpoints written before the seed axis
       d["seeds"] = [d.pop("seed")]
-    for k in ("policy_hidden_sizes", "value_hidden_sizes", "seeds", "init_log_std"):
-      if d.get(k) is not None:
+    for k in ("policy_hidden_sizes", "value_hidden_sizes", "seeds", "init_log_std", "damage_weight"):
+      if isinstance(d.get(k), list):
         d[k] = tuple(d[k])
     names = {f.name for f in dataclasses.fields(cls)}
     # Older checkpoints lack the newer fields: they ran with what these were then.

@@ -186,8 +186,12 @@ class Trainer:
     return tree if self.axis_name is None else jax.lax.pmax(tree, self.axis_name)
 
   # -- init -----------------------------------------------------------------
-  def init_state(self, seed) -> TrainState:
-    """Fresh state of one seed (``seed`` i32[], traced: vmap it over a seed vector)."""
+  def init_states(self, seeds) -> TrainState:
+    """Fresh state of every run (``seeds`` i32[S]), each with its seed's w from the config."""
+    return jax.vmap(self.init_state)(seeds, jnp.asarray(self.cfg.damage_weights, jnp.float32))
+
+  def init_state(self, seed, damage_weight) -> TrainState:
+    """Fresh state of one seed (``seed`` i32[], ``damage_weight`` f32[] its run's w; traced: vmap them)."""
     cfg = self.cfg
     key = jax.random.PRNGKey(seed)
     key, k_net, k_env = jax.random.split(key, 3)
@@ -207,7 +211,7 @@ class Trainer:
             kind=f32(kind), budget=f32(cfg.budget or 0.0), kp=f32(0.0 if plain else cfg.pid_kp),
             ki=f32(cfg.lagrange_lr if plain else cfg.pid_ki), kd=f32(0.0 if plain else cfg.pid_kd),
             lam_max=f32(cfg.lagrange_max), anneal_updates=f32(cfg.budget_anneal_iterations)),
-        damage_weight=f32(cfg.damage_weight),
+        damage_weight=f32(damage_weight),
         cost_estimate=f32(0.0),
         has_cost_estimate=f32(0.0),
         rng=key,

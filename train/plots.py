@@ -12,10 +12,12 @@ def _series(rows: Sequence[dict], key: str, seed=None):
   return [p[0] for p in pts], [p[1] for p in pts]
 
 
-def plot_training(rows: Sequence[dict], path: str, title: str = "", budget: Optional[float] = None) -> str:
+def plot_training(rows: Sequence[dict], path: str, title: str = "", budget: Optional[float] = None,
+                  labels: Optional[dict] = None) -> str:
   """Write a PNG of the rows of ``metrics.jsonl`` (the paper's RL figure: return and damage per
   episode), plus completion/safe completion and, for a Lagrangian run, λ. Each seed (rows' ``seed``)
-  is one colour; training (stochastic) dashed, evaluation (deterministic) solid."""
+  is one colour, named by ``labels[seed]`` if given (e.g. its damage weight) or "seed N"; training
+  (stochastic) dashed, evaluation (deterministic) solid."""
   import matplotlib
 
   matplotlib.use("Agg")
@@ -26,7 +28,7 @@ def plot_training(rows: Sequence[dict], path: str, title: str = "", budget: Opti
   n = 4 if lagrangian else 3
   fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4))
   for j, seed in enumerate(seeds):
-    color, tag = f"C{j % 10}", f"seed {seed}" if seed is not None else ""
+    color, tag = f"C{j % 10}", (labels or {}).get(seed, f"seed {seed}" if seed is not None else "")
     first = j == 0
     for ax, train_key, eval_key in ((axes[0], "train/episode_return", "eval/task_return"),
                                     (axes[1], "train/episode_cost", "eval/episode_cost")):

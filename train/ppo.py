@@ -269,7 +269,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     preset: ``playground`` | ``paper`` | ``legacy`` (train.config); ``**config`` overrides its fields
       (``damage_weight``, ``budget``, ``multiplier``, ``num_envs``, ``num_timesteps``, ...).
     seeds: sequence of seeds trained together (leading axis S of the train state); ``seed``: one seed
-      (S = 1). Default (0,).
+      (S = 1). Default (0,). ``damage_weight`` may give one w per seed: e.g. ``seeds=(0, 1, 2, 3)``,
+      ``damage_weight=(0, 0, 2, 2)`` trains task reward alone and w = 2 as runs of one program.
     episode_length: None → the task's ``episode_length``.
     out_dir: config.json, metrics.jsonl/.csv (rows carry ``seed``), checkpoint.npz (all seeds), curves.png.
     resume: continue from ``out_dir/checkpoint.npz`` (same config; only num_timesteps, eval_every,
@@ -297,7 +298,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   seeds = (0,) if seeds is None and seed is None else ((seed,) if seeds is None else seeds)
   if isinstance(seeds, (list, tuple)):
     seeds = tuple(seeds)
-  for k in ("policy_hidden_sizes", "value_hidden_sizes", "init_log_std"):
+  for k in ("policy_hidden_sizes", "value_hidden_sizes", "init_log_std", "damage_weight"):
     if isinstance(config.get(k), list):
       config[k] = tuple(config[k])
   cfg = PPOConfig.preset(preset, seeds=seeds, episode_length=episode_length or 1, **config).validate()
@@ -340,7 +341,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   timings = {k: 0.0 for k in ("compile", "eval_compile", "iterations", "eval", "checkpoint", "host")}
   rows: list = []
   wall0 = 0.0  # s of training before this call (resume)
-  init_fn = jax.vmap(trainer.init_state)
+  init_fn = trainer.init_states
   specs = M.state_specs(jax.eval_shape(init_fn, seed_arr))
   layout = M.shardings(mesh, specs)
   if resume and os.path.exists(ckpt_path):
@@ -390,7 +391,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   bar = None
   if progress and main:
     from tqdm import tqdm
-    desc = f"{task_name} {cfg.multiplier if cfg.lagrangian else f'w={cfg.damage_weight:g}'} ×{S} seeds"
+    weights = ",".join(dict.fromkeys(f"{w:g}" for w in cfg.damage_weights))
+    desc = f"{task_name} {cfg.multiplier if cfg.lagrangian else f'w={weights}'} ×{S} seeds"
     bar = tqdm(total=n_iter * spi * S, initial=start_iteration * spi * S, unit="step", unit_scale=True,
                desc=desc, dynamic_ncols=True)
 
@@ -473,7 +475,10 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     timings.update(profile_iteration(trainer, ts, iteration_fn, mesh, specs))
   if writes is not None and plot and rows:
     from train import plots
-    plots.plot_training(rows, os.path.join(out_dir, "curves.png"), title=task_name, budget=cfg.budget)
+    weights = dict(zip(cfg.seeds, cfg.damage_weights))
+    labels = {s: f"seed {s}, w = {w:g}" for s, w in weights.items()} if len(set(weights.values())) > 1 else None
+    plots.plot_training(rows, os.path.join(out_dir, "curves.png"), title=task_name, budget=cfg.budget,
+                        labels=labels)
   timed_iters = max(iteration - start_iteration - 1, 0)
   params0 = jax.tree.map(lambda x: x[0], distributed.to_host(trainer.inference_params(ts)))
   make_policy = trainer.make_policy
