@@ -6,14 +6,11 @@ file are refused (exit 2, naming the field) before anything compiles.
 
 import json
 import os
-import sys
 
 import pytest
+from conftest import load_benchmark
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
-
-import contrast_one_program as C  # noqa: E402
+C = load_benchmark("contrast_one_program")
 
 TINY = ["--task", "train.experiments.pusher:PusherEnv", "--task-settings", "{}", "--preset", "paper",
         "--num-envs", "8", "--unroll-length", "8", "--iterations", "2", "--seeds", "0,1"]
