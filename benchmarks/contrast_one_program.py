@@ -31,6 +31,7 @@ sys.path.insert(0, ROOT)
 import mjx_damage  # noqa: E402,F401  (XLA:CPU flags and the jax compat shim before jax starts)
 
 import provenance  # noqa: E402  (the sibling module: the results writer)
+import train  # noqa: E402
 from mjx_damage import outputs, runtime  # noqa: E402
 from train.config import PRESETS, PPOConfig  # noqa: E402
 from train.envs import resolve_task  # noqa: E402
@@ -70,9 +71,9 @@ def parse(argv=None):
     raise ValueError(f"task_settings: a JSON object, got {a.task_settings!r}")
   resolve_task(a.task, a.task_kwargs)  # an unknown task or keyword: "task: …" before anything compiles
   a.overrides = {k: v for k, v in (("num_envs", a.num_envs), ("unroll_length", a.unroll_length)) if v is not None}
-  both = layouts(a.seeds, a.damage_weight)
-  for seeds, weights in both:  # every field checked before anything compiles
-    PPOConfig.preset(a.preset, seeds=seeds, damage_weight=weights, **a.overrides).validate()
+  # the two programs' configs, every field checked before anything compiles
+  a.configs = [PPOConfig.preset(a.preset, seeds=seeds, damage_weight=weights, **a.overrides).validate()
+               for seeds, weights in layouts(a.seeds, a.damage_weight)]
   return a
 
 
@@ -82,11 +83,9 @@ def layouts(seeds, w) -> list[tuple[tuple[int, ...], tuple[float, ...]]]:
   return [(tuple(seeds), (w,) * len(seeds)), (tuple(seeds) + more, (0.0,) * len(seeds) + (w,) * len(seeds))]
 
 
-def measure(a, seeds, weights) -> dict:
-  """Train ``a.iterations`` iterations of one program; its compile and per-iteration seconds."""
-  import train
-
-  cfg = PPOConfig.preset(a.preset, seeds=seeds, damage_weight=weights, **a.overrides).validate()
+def measure(a, cfg: PPOConfig) -> dict:
+  """Train ``a.iterations`` iterations of the program of ``cfg``; its compile and per-iteration seconds."""
+  seeds, weights = cfg.seeds, cfg.damage_weights
   res = train.train(a.task, task_kwargs=a.task_kwargs, preset=a.preset, seeds=seeds, damage_weight=weights,
                     num_timesteps=a.iterations * cfg.steps_per_iteration, num_eval_envs=8, progress=False,
                     plot=False, **a.overrides)
@@ -127,8 +126,8 @@ def main(argv=None) -> int:
   except ValueError as e:
     print(f"contrast_one_program: {e}", file=sys.stderr)
     return 2
-  rows = [measure(a, seeds, weights) for seeds, weights in layouts(a.seeds, a.damage_weight)]
-  cfg = PPOConfig.preset(a.preset, **a.overrides)
+  rows = [measure(a, cfg) for cfg in a.configs]
+  cfg = a.configs[0]
   res = {"task": a.task, "task_kwargs": a.task_kwargs, "preset": a.preset, "device": device,
          "num_envs": cfg.num_envs, "unroll_length": cfg.unroll_length, "iterations": a.iterations, "rows": rows,
          "ratio": round(rows[1]["s_per_iteration"] / rows[0]["s_per_iteration"], 3)}

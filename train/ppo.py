@@ -475,8 +475,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
     timings.update(profile_iteration(trainer, ts, iteration_fn, mesh, specs))
   if writes is not None and plot and rows:
     from train import plots
-    weights = dict(zip(cfg.seeds, cfg.damage_weights))
-    labels = {s: f"seed {s}, w = {w:g}" for s, w in weights.items()} if len(set(weights.values())) > 1 else None
+    labels = ({s: f"seed {s}, w = {w:g}" for s, w in zip(cfg.seeds, cfg.damage_weights)}
+              if len(set(cfg.damage_weights)) > 1 else None)
     plots.plot_training(rows, os.path.join(out_dir, "curves.png"), title=task_name, budget=cfg.budget,
                         labels=labels)
   timed_iters = max(iteration - start_iteration - 1, 0)
