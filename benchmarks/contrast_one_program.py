@@ -14,8 +14,13 @@ existing file is refused unless ``--overwrite``). Usage::
     # this 2-core CPU: the paper preset with 8 envs per seed and 32-step rollouts
     PYTHONPATH=. .venv/bin/python benchmarks/contrast_one_program.py --preset paper --num-envs 8 \\
         --unroll-length 32 --iterations 4
-    # a GPU: the paper preset as the Place Plate runs use it (256 envs per seed, 512-step rollouts)
-    python benchmarks/contrast_one_program.py --preset paper --iterations 6
+    # a GPU: the paper preset as the Place Plate runs use it (256 envs per seed, 512-step rollouts), then
+    # the playground preset (2048 envs per seed): about 4 min each on one H200 with a warm compile cache
+    python benchmarks/contrast_one_program.py --preset paper --iterations 5
+    python benchmarks/contrast_one_program.py --preset playground --iterations 12 --tag playground
+
+Each program ends with train()'s final evaluation of its runs (8 episodes each), which the timings leave out
+but the wall clock does not. Each program's row is printed as soon as it is measured.
 """
 
 from __future__ import annotations
@@ -126,7 +131,10 @@ def main(argv=None) -> int:
   except ValueError as e:
     print(f"contrast_one_program: {e}", file=sys.stderr)
     return 2
-  rows = [measure(a, cfg) for cfg in a.configs]
+  rows = []
+  for cfg in a.configs:  # each program's row printed as it comes, so a run cut short still tells the first
+    rows.append(measure(a, cfg))
+    print(json.dumps(rows[-1]), flush=True)
   cfg = a.configs[0]
   res = {"task": a.task, "task_kwargs": a.task_kwargs, "preset": a.preset, "device": device,
          "num_envs": cfg.num_envs, "unroll_length": cfg.unroll_length, "iterations": a.iterations, "rows": rows,
