@@ -28,6 +28,7 @@ def test_posture_pull_no_longer_moves_the_hand_under_a_zero_action():
     assert moved[0] > 4e-4 and moved[1] < 5e-5, moved
 
 
+@pytest.mark.filterwarnings("error::UserWarning")  # a native MjData's f64 qpos once warned from the kinematics
 def test_holding_ignores_the_gripper_command():
   m, _, rob = checks.bare_scene("panda")
   hold = P.PandaHolding(m, rob.control_dt, 0.03)

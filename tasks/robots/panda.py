@@ -322,6 +322,7 @@ class Panda(Robot):
     """Joint position targets f32[7] for arm angles ``q`` f32[7] and sanitized action ``a``; ``base``
     (link0's pose the arm is solved from; default the mount) and ``target`` (grip-point target f32[3];
     default the grip point moved by the action) for the mobile base."""
+    q = jnp.asarray(q)  # a native MjData's f64 qpos: JAX's own float width, not a per-constant f64 request
     p, r, jac = self.kinematics(q, base)
     dp = (jnp.clip(p + a[0:3] * MAX_STEP, self._floor(r, lo), hi) if target is None else target) - p
     err = jnp.concatenate([dp, ROT_WEIGHT * rot_err(r, self._r_target(r, a))])
