@@ -39,6 +39,13 @@ def test_holding_ignores_the_gripper_command():
     np.testing.assert_allclose(c[3:5], [0.03, 0.03])
 
 
+@pytest.mark.filterwarnings("error::UserWarning")
+def test_kinematics_of_a_native_mjdata_stay_quiet():
+  m, _, rob = checks.bare_scene("panda")
+  d = mujoco.MjData(m)  # f64 qpos
+  assert rob.eef_pos(d).dtype == rob.hand_rot(d).dtype == rob.eef_vel(d).dtype == jnp.float32
+
+
 def test_weld_to_hand_refuses_a_scene_without_that_weld():
   spec = mujoco.MjSpec.from_string("<mujoco><worldbody><body name='b'><freejoint/><geom size='.1'/></body>"
                                    "</worldbody></mujoco>")

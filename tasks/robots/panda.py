@@ -131,6 +131,8 @@ def fk(q, base_pos, base_rot):
     (p f32[3] grip point m, R f32[3, 3] hand rotation, J f32[6, 7] geometric Jacobian of the grip
     point: rows 0–2 linear m/rad, rows 3–5 angular, world frame).
   """
+  q = jnp.asarray(q)  # a native MjData's f64 qpos: JAX's own float width, not a per-constant f64 request
+
   def joint(carry, x):
     p, r = carry
     pos, rx, qi = x
@@ -322,7 +324,7 @@ class Panda(Robot):
     """Joint position targets f32[7] for arm angles ``q`` f32[7] and sanitized action ``a``; ``base``
     (link0's pose the arm is solved from; default the mount) and ``target`` (grip-point target f32[3];
     default the grip point moved by the action) for the mobile base."""
-    q = jnp.asarray(q)  # a native MjData's f64 qpos: JAX's own float width, not a per-constant f64 request
+    q = jnp.asarray(q)  # as fk: its own constants below are built at q's dtype
     p, r, jac = self.kinematics(q, base)
     dp = (jnp.clip(p + a[0:3] * MAX_STEP, self._floor(r, lo), hi) if target is None else target) - p
     err = jnp.concatenate([dp, ROT_WEIGHT * rot_err(r, self._r_target(r, a))])
