@@ -44,7 +44,8 @@ here 256 envs per seed) run longer than one device call, so the run lives in --w
 call continues it with --resume (the row lists every call; the checkpoint, 46 MB for 3 seeds, must be on the
 machine that continues). One reward alone on an H200 trains 58–65 k env steps/s over its 3 seeds, ≈ 1,300 s
 for the 195 updates; two such processes sharing one GPU ran 22 k each, so give each its own GPU or call.
-Task reward alone ran its whole 195 updates in three such calls on one warm H200 (66, 73 and 56 updates;
+Task reward alone and w = 2 each ran the whole 195 updates in three such calls on one warm H200 (66, 73
+and 56 updates; 67, 72 and 56;
 a work folder under the ignored runs/ is what such a machine keeps between calls; a machine released
 between calls comes back without it, and --resume then refuses, before anything compiles)::
 
