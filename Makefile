@@ -12,7 +12,7 @@ export MPLBACKEND ?= Agg
 SYSTEM_PACKAGES := libosmesa6 xvfb xdotool
 # The suite is compile-bound and XLA compiles on one thread: two pytest workers (one module per
 # worker, so module-scoped compiled fixtures compile once) about halve its time on 2 cores
-# (≈ 20 min on CI; on a 2-core dev machine 17 min with a warm compilation cache, 42 min cold).
+# (≈ 20 min on CI; on a 2-core dev machine 17–20 min with a warm compilation cache, 42 min cold).
 TEST_WORKERS ?= 2
 
 .PHONY: demo test test-slow bench install clean system-deps
