@@ -398,6 +398,29 @@ def _script(name: str):
   return importlib.import_module(name)
 
 
+def table_stem(args, action: str) -> str:
+  """Where the benchmark's table by ``action`` goes (without .md / .json), as the steps see it."""
+  return os.path.join(_rel(args.results_dir), f"trainer_table_{args.task}_{args.tag}_{action}")
+
+
+def check_tables(args, steps: list[Step]) -> None:
+  """Refuse (``ValueError`` naming ``tag``) a table already at the benchmark's table names that was built from
+  other results than its steps': the benchmark rebuilds its own tables after every call, and must not replace
+  a table someone else made under that name."""
+  own = {os.path.basename(s.results) for s in steps}
+  for action in ("mode", "sample"):
+    stem = _at(table_stem(args, action))
+    if not (os.path.exists(stem + ".json") or os.path.exists(stem + ".md")):
+      continue
+    doc = io.read_json(stem + ".json", "tables") if os.path.exists(stem + ".json") else {}
+    sources = doc.get("sources") if isinstance(doc, dict) else None
+    other = sorted(set(sources) - own) if isinstance(sources, list) and sources else ["(no sources recorded)"]
+    if other:
+      raise ValueError(f"tag: {_rel(stem)}.md / .json exists and was built from other results than this "
+                       f"benchmark's ({', '.join(other[:3])}{', …' if len(other) > 3 else ''}); the benchmark "
+                       "would replace it: choose another --tag or --results-dir")
+
+
 def build_tables(args, steps: list[Step]) -> list[str]:
   """``trainer_table.py`` by mode and by sample over every results file of ``steps`` there is (in this process:
   it reads JSON, no JAX); their stems."""
@@ -405,10 +428,11 @@ def build_tables(args, steps: list[Step]) -> list[str]:
   stems = []
   if not sources:
     return stems
+  check_tables(args, steps)  # again: a table may have appeared while the steps ran
   table = _script("trainer_table")
   with contextlib.chdir(ROOT):  # the table records its command with the paths the steps wrote
     for action in ("mode", "sample"):
-      stem = os.path.join(_rel(args.results_dir), f"trainer_table_{args.task}_{args.tag}_{action}")
+      stem = table_stem(args, action)
       table.main(["--task", args.task, "--action", action, "--sources", *sources, "--out", stem])
       stems.append(stem)
   return stems
@@ -425,6 +449,8 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
     slug = args.device or slug or device_slug(child_env)
     steps = [update_status(s) for s in plan(args, slug)]
     chosen = select(steps, args.parts)
+    if not args.plan and (not args.tables or any(os.path.exists(_at(s.results)) for s in steps)):
+      check_tables(args, steps)  # before any step runs: the call would end by replacing the table
     for s in chosen if not (args.plan or args.tables) else []:
       if s.status in ("to run", "partly done"):
         check_step(s)
@@ -469,7 +495,11 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
   except ValueError as e:
     print(f"three_trainers.py: error: {e}", file=sys.stderr)
     return 2
-  stems = build_tables(args, steps)
+  try:
+    stems = build_tables(args, steps)
+  except ValueError as e:
+    print(f"three_trainers.py: error: {e}; the steps' results are kept", file=sys.stderr)
+    return 2
   left = [s.name for s in (update_status(s) for s in steps) if s.status != "done"]
   print(f"tables: {', '.join(x + '.md' for x in stems) or 'none yet (no step done)'}; "
         f"steps left: {', '.join(left) or 'none'}")

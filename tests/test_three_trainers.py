@@ -223,6 +223,36 @@ def test_tables_of_a_benchmark_run_on_another_device(tmp_path, capsys):
   assert here("--tables") == 0 and "steps left: ours_task_only, ours_penalty" in capsys.readouterr().out
 
 
+def test_a_table_of_its_name_built_from_other_results_is_not_replaced(tmp_path, capsys):
+  """The benchmark rebuilds its tables after every call; a table already at their name that other results
+  built (a hand-made table, another device's benchmark under the same --tag) stops the call before any step
+  runs, and stays as it was."""
+  argv = ["--trainers", "ours", "--seeds", "0,1,2"] + _dirs(tmp_path)
+  assert _run(argv, _stand_in([])) == 0  # on "gpu_x": its own tables, rebuilt by --tables there
+  assert _run(argv + ["--tables"]) == 0
+  stem = tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode"
+  doc = json.load(open(f"{stem}.json"))
+  doc["sources"] = doc["sources"] + ["rl_place_plate_by_hand.json"]
+  with open(f"{stem}.json", "w") as f:
+    json.dump(doc, f)
+  before = open(f"{stem}.json").read(), open(f"{stem}.md").read()
+  for extra in ([], ["--tables"]):
+    assert _run(argv + extra) == 2
+    err = capsys.readouterr().err
+    assert "tag: " in err and "rl_place_plate_by_hand.json" in err and "choose another --tag" in err, err
+  os.remove(f"{stem}.json")  # a table with no record of its sources is not taken for the benchmark's either
+  assert _run(argv + ["--tables"]) == 2 and "(no sources recorded)" in capsys.readouterr().err
+  assert open(f"{stem}.md").read() == before[1]
+  # on another device the same --tag names the same tables: --tables has nothing there to build them from, a
+  # call that would run steps is refused before any runs; another --tag is a benchmark of its own
+  def on_cpu(*extra, runner=lambda step, env: pytest.fail(f"{step.name} ran")):
+    return three.main(argv + list(extra), slug="cpu", runner=runner)
+  assert on_cpu("--tables") == 0 and "tables: none yet" in capsys.readouterr().out
+  assert on_cpu() == 2 and "choose another --tag" in capsys.readouterr().err
+  assert open(f"{stem}.md").read() == before[1]
+  assert on_cpu("--tag", "cpu_run", runner=_stand_in([])) == 0
+
+
 def test_the_driver_keeps_jax_off_the_gpu(tmp_path):
   """The driver runs as a script with JAX already imported (by mjx_damage): setting JAX_PLATFORMS then is too
   late, so it pins JAX's config to the CPU; without that, on a GPU machine it took 75 % of the GPU's memory
