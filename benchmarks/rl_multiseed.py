@@ -45,9 +45,9 @@ call continues it with --resume (the row lists every call; the checkpoint, 46 MB
 machine that continues). One reward alone on an H200 trains 58–65 k env steps/s over its 3 seeds, ≈ 1,300 s
 for the 195 updates; two such processes sharing one GPU ran 22 k each, so give each its own GPU or call.
 Task reward alone and w = 2 each ran the whole 195 updates in three such calls on one warm H200 (66, 73
-and 56 updates; 67, 72 and 56;
-a work folder under the ignored runs/ is what such a machine keeps between calls; a machine released
-between calls comes back without it, and --resume then refuses, before anything compiles)::
+and 56 updates with task reward alone, 67, 72 and 56 with w = 2; a work folder under the ignored runs/ is
+what such a machine keeps between calls; a machine released between calls comes back without it, and --resume
+then refuses, before anything compiles)::
 
     P="--work-dir runs/rl_paper --paper-timesteps 25559040 --eval-actions sample,mode --seeds 0,1,2 --budget-seconds 490"
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --tag paper_task_only --results-dir $OUT
