@@ -63,7 +63,7 @@ TRAINERS = ("ours", "brax", "paper")
 # Seconds a step takes beyond its training budget, by trainer: starting the script, the final evaluation on
 # 1024 episodes by two actions, writing; --stop-after counts them. Measured by this driver on an H200 ("== step:
 # ... after N s"): Shelve Item ours 35-60 s over a 300 s budget, Brax's 127 s over 400 s; Place Plate ours 37-63 s,
-# Brax's 72-115 s over 300 s.
+# Brax's 72-131 s over 300 s.
 OVERHEAD_S = {"ours": 75.0, "brax": 150.0, "paper": 90.0}
 
 
