@@ -396,6 +396,36 @@ def test_a_run_warns_once_when_its_normalised_inputs_pass_the_usual_clip_unless_
   assert not [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
 
 
+def test_critic_divergence_message_names_the_seeds_whose_value_loss_leapt():
+  """Past V_FLOOR and V_JUMP times the seed's own lowest: our Place Plate seed 0 (2.4 -> 2.1e15) warns; a loss
+  that only rose 20-fold, Pick Egg's critic meeting the penalty late (0.089 -> 4.5e7, under the floor) and a
+  first iteration do not."""
+  v, low = np.array([2.1e15, 50.0, 4.5e7]), np.array([2.44, 2.5, 0.089])
+  msg = ppo.critic_divergence_message(v, low, (0, 1, 2), 36, 5898240)
+  assert "seed 0: 2.1e+15, its lowest 2.44" in msg and "seed 1" not in msg and "seed 2" not in msg
+  assert "iteration 36 (5.9 M env steps" in msg
+  assert ppo.critic_divergence_message(v, np.full(3, np.inf), (0, 1, 2), 1, 0) is None  # nothing to compare with
+  assert ppo.critic_divergence_message(np.array([2e9]), np.array([1e-3]), (4,), 9, 9) is not None
+  assert ppo.critic_divergence_message(np.array([2e9]), np.array([1e4]), (4,), 9, 9) is None  # 2e5-fold
+
+
+def test_a_run_warns_once_when_its_critic_diverges(env, monkeypatch):
+  """The training loop warns (CriticDivergedWarning, once per run) when a seed's loss/v_loss leaps past its own
+  lowest; with the thresholds at 0 any second iteration's loss does, and the defaults keep a healthy run quiet."""
+  monkeypatch.setattr(ppo, "V_JUMP", 0.0)
+  monkeypatch.setattr(ppo, "V_FLOOR", 0.0)
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=3 * ITER, **TINY)
+  div = [w for w in caught if issubclass(w.category, ppo.CriticDivergedWarning)]
+  assert len(div) == 1 and "iteration 2 " in str(div[0].message) and "seed 3" in str(div[0].message)
+  monkeypatch.undo()
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=3 * ITER, **TINY)
+  assert not [w for w in caught if issubclass(w.category, ppo.CriticDivergedWarning)]
+
+
 @pytest.mark.parametrize("kwargs,name", [
     (dict(budget=-1.0), "budget"),
     (dict(damage_warmup_steps=-1, damage_weight=2.0), "damage_warmup_steps"),

@@ -114,6 +114,39 @@ def large_input_message(z, seeds, obs_clip: Optional[float]) -> Optional[str]:
           f"run; the metric obs_max_abs_z logs it every row.")
 
 
+# A critic whose value loss leaps this many times above its own lowest, and past V_FLOOR (an RMS error of about
+# 6e4 at vf_coefficient 0.5, beyond any return of our tasks), predicts values no return reaches, and its
+# bootstrapped targets chase them. On Place Plate's box counter (one H200, 2026-12-02) one seed of ours went
+# 2.4 -> 2.1e15 -> 7.8e19 within 6 M env steps and never completed an episode again, and one of Brax's PPO went
+# 2.0 -> 8.7e12 and fell from 99.6 to 0 % safe. benchmarks/value_loss_scan.py applies this test to the points
+# every committed run logged: 6 of our 653 seed-runs cross both lines (4 never learnt their task or lost it, 2
+# learnt on), 3 of Brax's 40. The floor
+# keeps quiet the critic of a run that meets large costs late (Pick Egg's penalty after its warm-up: 0.09 ->
+# 4.5e7, its run 100 % safe) or wakes from near-zero rewards.
+V_JUMP = 1e6
+V_FLOOR = 1e9
+
+
+class CriticDivergedWarning(UserWarning):
+  """A seed's value loss jumped orders of magnitude above its lowest: its advantages are noise while it lasts."""
+
+
+def critic_divergence_message(v_loss, v_low, seeds, iteration: int, env_steps: int) -> Optional[str]:
+  """What to warn when a seed's value loss ``v_loss`` (f32[S], the metric ``loss/v_loss`` of this iteration)
+  is past both :data:`V_FLOOR` and :data:`V_JUMP` times ``v_low`` (f32[S], its lowest at earlier iterations;
+  ``inf`` before any); None otherwise."""
+  v, low = np.asarray(v_loss, np.float64), np.asarray(v_low, np.float64)
+  bad = (v > V_FLOOR) & (v > V_JUMP * low)
+  if not np.any(bad):
+    return None
+  which = ", ".join(f"seed {s}: {a:.3g}, its lowest {b:.3g}" for s, a, b, x in zip(seeds, v, low, bad) if x)
+  return (f"the critic diverged at iteration {iteration} ({env_steps / 1e6:.1f} M env steps per seed): value loss "
+          f"{which}. Its predictions have left the range of the task's returns, so the advantages the policy "
+          f"learns from are noise until it recovers, if it does (a seed of ours on Place Plate never completed "
+          f"an episode again; docs/safe_rl.md, \"A second draw of the driver\"). A rerun is what has mended it "
+          f"so far. Warned once per run; loss/v_loss is logged every row.")
+
+
 def non_finite_losses(m: dict, seeds) -> dict:
   """``{seed: [metric, …]}`` of the seeds whose ``loss/*`` metrics (f32[S] each) are not all finite."""
   bad = {}
@@ -399,6 +432,7 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
   window = {k: np.zeros(S) for k in WINDOW_KEYS}  # per-seed training-episode sums since the last row
   z_window = np.zeros(S)  # per-seed largest obs_max_abs_z since the last row (a spike between rows counts)
   warned_z = not main  # large_input_message decides the rest (nothing to warn with obs_clip set)
+  warned_v, v_low = not main, np.full(S, np.inf)  # v_low: per-seed lowest loss/v_loss of the iterations so far
   stopped_early, final_evals, iteration, first_eval = False, [], start_iteration, True
   with _StopFlag() as stop:
     for iteration in range(start_iteration + 1, n_iter + 1):
@@ -419,6 +453,12 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
         if not warned_z and (msg := large_input_message(z_window, cfg.seeds, cfg.obs_clip)):
           warnings.warn(msg, LargeInputWarning, stacklevel=2)
           warned_z = True
+      if "loss/v_loss" in m:
+        v = np.asarray(m["loss/v_loss"], np.float64)
+        if not warned_v and (msg := critic_divergence_message(v, v_low, cfg.seeds, iteration, iteration * spi)):
+          warnings.warn(msg, CriticDivergedWarning, stacklevel=2)
+          warned_v = True
+        v_low = np.minimum(v_low, v)
       last = iteration == n_iter
       # One decision for all processes: one that stopped alone would leave the others in a collective.
       signalled, over_time = distributed.any_process(
