@@ -86,3 +86,5 @@ def test_training_run_with_cost_critic_and_budget_curriculum():
   assert np.all((lam >= 0) & (lam <= 5.0))
   assert all(np.isfinite(v) for r in res.history for v in r.values() if isinstance(v, float))
   assert res.train_state.params.value["params"]["hidden_2"]["kernel"].shape[-1] == 2
+  # the cost head's loss is logged beside the sum, so a diverged critic says which head it was
+  assert all(0.0 <= r["loss/cost_v_loss"] <= r["loss/v_loss"] for r in res.history)

@@ -321,7 +321,9 @@ class Trainer:
 
   @property
   def _loss_keys(self):
-    return LOSS_KEYS + (("kl_update",) if self.cfg.target_kl is not None else ())
+    # the cost head's share of v_loss: which head diverged when the critic does (train.ppo.CriticDivergedWarning)
+    return (LOSS_KEYS + (("cost_v_loss",) if self.cfg.cost_critic else ())
+            + (("kl_update",) if self.cfg.target_kl is not None else ()))
 
   def _epoch(self, normalizer, weights, start_policy, data, carry, key):
     k_perm, k_loss = jax.random.split(key)
