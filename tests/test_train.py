@@ -381,19 +381,21 @@ def test_large_input_message_names_the_seeds_past_the_line_and_is_silent_when_cl
   assert ppo.large_input_message(np.array([9.9, 10.0]), (0, 1), None) is None  # at the line: quiet
 
 
+def _warned(category, env, iterations, **kwargs) -> list:
+  """The messages of ``category`` a tiny training run of ``iterations`` iterations warned."""
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    train.train(env, seeds=SEEDS, num_timesteps=iterations * ITER, eval_every=iterations * ITER, **TINY, **kwargs)
+  return [str(w.message) for w in caught if issubclass(w.category, category)]
+
+
 def test_a_run_warns_once_when_its_normalised_inputs_pass_the_usual_clip_unless_clipped(env, monkeypatch):
   """The training loop warns (LargeInputWarning, once per run) when obs_max_abs_z passes Z_WARN with
   observations unclipped, and not with obs_clip set. Z_WARN lowered to 0 so a tiny run crosses it."""
   monkeypatch.setattr(ppo, "Z_WARN", 0.0)
-  with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    train.train(env, seeds=SEEDS, num_timesteps=2 * ITER, eval_every=2 * ITER, **TINY)
-  large = [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
-  assert len(large) == 1 and "seed 3" in str(large[0].message) and "--obs-clip" in str(large[0].message)
-  with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    train.train(env, seeds=SEEDS, num_timesteps=2 * ITER, eval_every=2 * ITER, obs_clip=10.0, **TINY)
-  assert not [w for w in caught if issubclass(w.category, ppo.LargeInputWarning)]
+  large = _warned(ppo.LargeInputWarning, env, 2)
+  assert len(large) == 1 and "seed 3" in large[0] and "--obs-clip" in large[0]
+  assert not _warned(ppo.LargeInputWarning, env, 2, obs_clip=10.0)
 
 
 def test_critic_divergence_message_names_the_seeds_whose_value_loss_leapt():
@@ -414,16 +416,10 @@ def test_a_run_warns_once_when_its_critic_diverges(env, monkeypatch):
   lowest; with the thresholds at 0 any second iteration's loss does, and the defaults keep a healthy run quiet."""
   monkeypatch.setattr(ppo, "V_JUMP", 0.0)
   monkeypatch.setattr(ppo, "V_FLOOR", 0.0)
-  with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=3 * ITER, **TINY)
-  div = [w for w in caught if issubclass(w.category, ppo.CriticDivergedWarning)]
-  assert len(div) == 1 and "iteration 2 " in str(div[0].message) and "seed 3" in str(div[0].message)
+  div = _warned(ppo.CriticDivergedWarning, env, 3)
+  assert len(div) == 1 and "iteration 2 " in div[0] and "seed 3" in div[0]
   monkeypatch.undo()
-  with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    train.train(env, seeds=SEEDS, num_timesteps=3 * ITER, eval_every=3 * ITER, **TINY)
-  assert not [w for w in caught if issubclass(w.category, ppo.CriticDivergedWarning)]
+  assert not _warned(ppo.CriticDivergedWarning, env, 3)
 
 
 @pytest.mark.parametrize("kwargs,name", [

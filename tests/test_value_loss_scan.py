@@ -7,7 +7,8 @@ import os
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-_spec = importlib.util.spec_from_file_location("value_loss_scan", os.path.join(ROOT, "benchmarks", "value_loss_scan.py"))
+_spec = importlib.util.spec_from_file_location("value_loss_scan",
+                                              os.path.join(ROOT, "benchmarks", "value_loss_scan.py"))
 S = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(S)
 
