@@ -119,10 +119,9 @@ def large_input_message(z, seeds, obs_clip: Optional[float]) -> Optional[str]:
 # bootstrapped targets chase them. On Place Plate's box counter (one H200, 2026-12-02) one seed of ours went
 # 2.4 -> 2.1e15 -> 7.8e19 within 6 M env steps and never completed an episode again, and one of Brax's PPO went
 # 2.0 -> 8.7e12 and fell from 99.6 to 0 % safe. benchmarks/value_loss_scan.py applies this test to the points
-# every committed run logged: 6 of our 653 seed-runs cross both lines (4 never learnt their task or lost it, 2
-# learnt on), 3 of Brax's 40. The floor
-# keeps quiet the critic of a run that meets large costs late (Pick Egg's penalty after its warm-up: 0.09 ->
-# 4.5e7, its run 100 % safe) or wakes from near-zero rewards.
+# committed runs logged (2026-12-02: 6 of our 653 seed-runs cross both lines, 4 of which never learnt their task
+# or lost it, 2 learnt on; 3 of Brax's 40). The floor keeps quiet the critic of a run that meets large costs
+# late (Pick Egg's penalty after its warm-up: 0.09 -> 4.5e7, its run 100 % safe) or wakes from near-zero rewards.
 V_JUMP = 1e6
 V_FLOOR = 1e9
 
