@@ -3,7 +3,7 @@
 
 A critic whose value loss leaps orders of magnitude above its own lowest predicts values no return of the task
 reaches; the advantages the policy learns from are then noise. Our trainer warns when that happens
-(:func:`train.ppo.critic_divergence_message`: past ``V_FLOOR`` and ``V_JUMP`` times the seed's lowest so far);
+(:func:`train.ppo.critic_diverged`: past ``V_FLOOR`` and ``V_JUMP`` times the seed's lowest so far);
 this script applies the same test to the points the results files logged, so it also reads runs made before the
 warning existed, and Brax's (``rl_brax_ppo.py`` files log brax's value loss at each of its evaluations).
 
@@ -40,6 +40,7 @@ from mjx_damage import io  # noqa: E402
 from train import ppo  # noqa: E402
 
 RESULTS = os.path.join(provenance.ROOT, "benchmarks", "results")
+TRAINERS = {"ours": "our trainer", "brax": "Brax's PPO"}
 
 
 def _ours(row: dict):
@@ -66,14 +67,14 @@ def first_crossing(points):
   lines, or None; the lowest is over the points before it, as the trainer's is over earlier iterations."""
   low = math.inf
   for steps, v in points:
-    if ppo.critic_divergence_message([v], [low], (0,), 0, steps) is not None:
+    if ppo.critic_diverged(v, low):
       return steps, v, low
     low = min(low, v)
   return None
 
 
 def scan(paths) -> dict:
-  runs, crossed, every, skipped = {"ours": 0, "brax": 0}, [], [], []
+  crossed, every, skipped = [], [], []
   for path in paths:
     doc = io.read_json(path, "sources")
     rows = doc.get("rows") if isinstance(doc, dict) else None
@@ -87,7 +88,6 @@ def scan(paths) -> dict:
       reward = (f"w = {row.get('damage_weight'):g}" if trainer == "brax" else
                 row.get("method") or row.get("label") or "?")
       for seed, pts, final in (_brax(row) if trainer == "brax" else _ours(row)):
-        runs[trainer] += 1
         hit = first_crossing(pts)
         one = {"file": os.path.basename(path), "trainer": trainer, "reward": reward, "seed": seed,
                "largest": max(v for _, v in pts), "points": len(pts), "final": final}
@@ -95,7 +95,8 @@ def scan(paths) -> dict:
         if hit is not None:
           crossed.append(dict(one, env_steps=hit[0], v_loss=hit[1], lowest_before=hit[2]))
   return {"v_jump": ppo.V_JUMP, "v_floor": ppo.V_FLOOR, "files": len(paths), "not_training_results": skipped,
-          "seed_runs": runs, "crossed": crossed, "every": every}
+          "seed_runs": {t: sum(c["trainer"] == t for c in every) for t in TRAINERS}, "crossed": crossed,
+          "every": every}
 
 
 def _final(c) -> str:
@@ -119,10 +120,10 @@ def render_md(res: dict) -> str:
     out.append(f"| {c['file']} | {c['trainer']} | {c['reward']} | {c['seed']} | {c['env_steps'] / 1e6:.1f} M | "
                f"{c['v_loss']:.3g} | {c['lowest_before']:.3g} | {c['largest']:.3g} | {_final(c)} |")
   if res.get("list_every"):
-    for trainer in ("ours", "brax"):
+    for trainer in TRAINERS:
       rows = [c for c in res["every"] if c["trainer"] == trainer]
       if rows:
-        out += ["", f"Every seed-run of {'our trainer' if trainer == 'ours' else 'Brax' + chr(39) + 's PPO'} "
+        out += ["", f"Every seed-run of {TRAINERS[trainer]} "
                 f"({len(rows)}), largest logged value loss by reward: "
                 + "; ".join(f"{r}: {max(c['largest'] for c in rows if c['reward'] == r):.3g} over "
                             f"{sum(c['reward'] == r for c in rows)}" for r in dict.fromkeys(c["reward"] for c in rows)),

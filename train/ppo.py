@@ -130,12 +130,17 @@ class CriticDivergedWarning(UserWarning):
   """A seed's value loss jumped orders of magnitude above its lowest: its advantages are noise while it lasts."""
 
 
-def critic_divergence_message(v_loss, v_low, seeds, iteration: int, env_steps: int) -> Optional[str]:
-  """What to warn when a seed's value loss ``v_loss`` (f32[S], the metric ``loss/v_loss`` of this iteration)
-  is past both :data:`V_FLOOR` and :data:`V_JUMP` times ``v_low`` (f32[S], its lowest at earlier iterations;
-  ``inf`` before any); None otherwise."""
+def critic_diverged(v_loss, v_low) -> np.ndarray:
+  """bool[S]: the seeds whose value loss ``v_loss`` (f32[S], the metric ``loss/v_loss``) is past both
+  :data:`V_FLOOR` and :data:`V_JUMP` times ``v_low`` (f32[S], its lowest before; ``inf`` before any)."""
   v, low = np.asarray(v_loss, np.float64), np.asarray(v_low, np.float64)
-  bad = (v > V_FLOOR) & (v > V_JUMP * low)
+  return (v > V_FLOOR) & (v > V_JUMP * low)
+
+
+def critic_divergence_message(v_loss, v_low, seeds, iteration: int, env_steps: int) -> Optional[str]:
+  """What to warn when :func:`critic_diverged` holds for a seed at this iteration; None otherwise."""
+  v, low = np.asarray(v_loss, np.float64), np.asarray(v_low, np.float64)
+  bad = critic_diverged(v, low)
   if not np.any(bad):
     return None
   which = ", ".join(f"seed {s}: {a:.3g}, its lowest {b:.3g}" for s, a, b, x in zip(seeds, v, low, bad) if x)
