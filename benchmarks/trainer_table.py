@@ -22,6 +22,12 @@ Brax rows and rows scored by another action count as not scored; rows of runs th
 ``rl_brax_ppo.py --shared-card N``, as not timed). Times are comparable only between runs on one kind of
 device, each alone on it; our trainer's seeds of one call train in one program and share its clock.
 
+Env steps to 80 % safe: the same first evaluation, counted in the run's own env steps (per seed), which no
+device or device sharing changes; its grain is the spacing of the run's evaluations (ours: ``--eval-every``,
+3 M by default; Brax: ``--num-timesteps`` over its evaluations), given per run. Env steps per s: the run's
+env steps over the same clock's seconds at its last evaluation (compile and evaluations included; a seed of
+ours gets its program's share).
+
 A second table lists every run with its seed, device, env steps, scores and the command that made it.
 
 Example (Place Plate, the committed H100/H200 files of the three trainers)::
@@ -45,7 +51,10 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from mjx_damage import io  # noqa: E402
+from mjx_damage import io, runtime  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rl_multiseed import time_to_safe  # noqa: E402  (sibling script: one definition of the first ≥ 80 % safe)
 
 ACTIONS = ("mode", "sample", "mean")
 BRAX = "Brax PPO (Playground PandaPickCube recipe)"
@@ -109,7 +118,7 @@ def _settings(*parts) -> str:
   return "; ".join(p for p in parts if p) or "defaults"
 
 
-# tasks.UNNAMED_ROBOT, the robot of files that name none; copied, not imported, so this script runs without JAX
+# tasks.UNNAMED_ROBOT, the robot of files that name none; copied, not imported, so this script loads no task code
 UNNAMED_ROBOT = "gripper"
 
 
@@ -146,10 +155,8 @@ def _brax_changes(recipe: dict) -> str:
 
 def _matmuls(row: dict) -> str:
   """Runs at another float32 matmul precision than the backend's default are other runs (docs/rl_task_design.md,
-  "TF32 in the simulation"); rows written before it was recorded ran at the default. The words of
-  mjx_damage.runtime.matmul_label, not imported: this script runs without JAX."""
-  precision = row.get("matmul_precision", "default")
-  return "" if precision == "default" else f"{precision} matmuls"
+  "TF32 in the simulation"); rows written before it was recorded ran at the default."""
+  return runtime.matmul_label(row.get("matmul_precision", "default"))
 
 
 def _clip(max_grad_norm: float | None) -> str:
@@ -184,7 +191,11 @@ def brax_runs(doc: dict, source: str, action: str) -> list[dict]:
                      date=r.get("date"), t80=r.get("time_to_80_safe_s"),
                      # a run that shared its device with others has no comparable seconds
                      t80_scored=(r.get("scored_curve") or {}).get("action") == "mode"
-                     and r.get("card_shared_by", 1) == 1, shared_by=r.get("card_shared_by", 1)))
+                     and r.get("card_shared_by", 1) == 1, shared_by=r.get("card_shared_by", 1),
+                     **_steps_to_safe((r.get("scored_curve") or {}).get("points") or []
+                                      if (r.get("scored_curve") or {}).get("action") == "mode" else [],
+                                      ("safe_completion", "completion", "wall_s"),
+                                      timed=r.get("card_shared_by", 1) == 1)))
   return runs
 
 
@@ -221,8 +232,28 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
                        env_steps=r["env_steps_per_seed"],
                        scores=_scores(p.get("final_eval_by_action"), p["final_eval"], head, action),
                        command=r["command"], source=source, date=r.get("date"),
-                       t80=p.get("time_to_80_safe_s"), t80_scored="time_to_80_safe_s" in p))
+                       t80=p.get("time_to_80_safe_s"), t80_scored="time_to_80_safe_s" in p,
+                       **_steps_to_safe([h for h in r.get("history") or [] if h.get("seed") == p["seed"]],
+                                        ("eval/safe_completion", "eval/completion", "wall_time"))))
   return runs
+
+
+def _steps_to_safe(points: list[dict], keys: tuple, timed: bool = True) -> dict:
+  """A run's env steps to its first evaluation by the mode with ≥ 80 % safe and ≥ 80 % completion (``s80``;
+  None: not reached), whether its evaluations were scored that way at all (``s80_scored``), their spacing
+  (``grain``: the median step between evaluations, env steps) and the run's env steps per second of its
+  training clock at its last evaluation (``rate``; None for a run that shared its device). ``points``: its
+  evaluations in order, each with ``env_steps`` and the ``keys`` (safe completion, completion, clock)."""
+  safe, completion, clock = keys
+  pts = [q for q in points if q.get(safe) is not None and q.get("env_steps") is not None]
+  if not pts:
+    return dict(s80=None, s80_scored=False, grain=None, rate=None)
+  steps = [0] + [q["env_steps"] for q in pts if q["env_steps"] > 0]
+  gaps = sorted(b - a for a, b in zip(steps, steps[1:]) if b > a)
+  last = pts[-1]
+  return dict(s80=time_to_safe(pts, keys=(safe, completion, "env_steps")), s80_scored=True,
+              grain=gaps[len(gaps) // 2] if gaps else None,
+              rate=last["env_steps"] / last[clock] if timed and last.get(clock) and last["env_steps"] else None)
 
 
 def meets_bar(run: dict) -> bool:
@@ -256,6 +287,10 @@ def groups(runs: list[dict]) -> list[dict]:
     g["time_to_80_safe"] = dict(scored=len(timed), reached=len(t), mean=sum(t) / len(t) if t else None,
                                 min=min(t, default=None), max=max(t, default=None),
                                 shared=sum(r.get("shared_by", 1) > 1 for r in rs))
+    counted = [r for r in rs if r.get("s80_scored")]
+    s = [r["s80"] for r in counted if r["s80"] is not None]
+    g["env_steps_to_80_safe"] = dict(scored=len(counted), reached=len(s), mean=sum(s) / len(s) if s else None,
+                                     min=min(s, default=None), max=max(s, default=None))
   return list(out.values())
 
 
@@ -286,6 +321,29 @@ def _t80(t: dict, runs: int) -> str:
   return f"{span}, {t['reached']} / {t['scored']} reached{rest}"
 
 
+def _s80(s: dict, runs: int) -> str:
+  """A group's env steps to 80 % safe: 'mean (min–max) M, k / n reached' over its runs scored by the mode."""
+  if not s["scored"]:
+    return "not scored"
+  rest = f" ({runs - s['scored']} not scored)" if runs > s["scored"] else ""
+  if not s["reached"]:
+    return f"none of {s['scored']} reached{rest}"
+  m = lambda v: f"{v / 1e6:.1f}"  # noqa: E731
+  span = m(s["mean"]) if s["min"] == s["max"] else f"{m(s['mean'])} ({m(s['min'])}–{m(s['max'])})"
+  return f"{span} M, {s['reached']} / {s['scored']} reached{rest}"
+
+
+def _run_s80(r: dict) -> str:
+  if not r.get("s80_scored"):
+    return "not scored"
+  every = f" (evaluations every {r['grain'] / 1e6:.1f} M)" if r.get("grain") else ""
+  return ("not reached" if r["s80"] is None else f"{r['s80'] / 1e6:.1f} M") + every
+
+
+def _run_rate(r: dict) -> str:
+  return "—" if r.get("rate") is None else f"{r['rate'] / 1e3:.0f} k"
+
+
 def _run_t80(r: dict) -> str:
   if r.get("shared_by", 1) > 1:  # a run's seconds while others ran on its device time nothing comparable
     return f"not timed (device shared by {r['shared_by']} runs)"
@@ -303,27 +361,29 @@ def render_md(doc: dict) -> str:
       f"{100 * DAMAGE_BAR[0]:.0f} % safe at ≥ {100 * DAMAGE_BAR[1]:.0f} % completion. Cells: mean (min–max) "
       "over the group's runs, %. Time to 80 % safe: s of training (compile incl.) to the first periodic "
       "evaluation by the mode with ≥ 80 % safe and ≥ 80 % completion (comparable only on one kind of device, "
-      "each run alone on it; our trainer's seeds of one call train in one program and share its clock). Built by:", "", f"    {doc['command']}", "",
+      "each run alone on it; our trainer's seeds of one call train in one program and share its clock); env "
+      "steps to 80 % safe: the same evaluation in the run's own env steps, any device (its grain, the "
+      "evaluations' spacing, per run below). Built by:", "", f"    {doc['command']}", "",
       "| trainer | reward | settings | runs | seeds | devices | env steps per run | completion | "
-      "safe completion | runs meeting the bar | time to 80 % safe (s) |",
-      "|---|---|---|---|---|---|---|---|---|---|---|"]
+      "safe completion | runs meeting the bar | time to 80 % safe (s) | env steps to 80 % safe |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in doc["groups"]:
     n = len(g["runs"])
     extra = f" ({g['unscored']} more not scored by {a})" if g["unscored"] else ""
     lines.append(f"| {g['trainer']} | {g['reward']} | {g['settings']} | {n}{extra} | "
                  f"{', '.join(map(str, g['seeds'])) or '—'} | {', '.join(g['devices']) or '—'} | "
                  f"{_steps(g['env_steps'])} | {_pct(g['completion'])} | {_pct(g['safe_completion'])} | {g['meet_bar']} / {n} "
-                 f"| {_t80(g['time_to_80_safe'], n)} |")
+                 f"| {_t80(g['time_to_80_safe'], n)} | {_s80(g['env_steps_to_80_safe'], n)} |")
   lines += ["", "Every run:", "",
             "| trainer | reward | settings | seed | device | env steps | completion | safe completion "
-            "| time to 80 % safe (s) | source | command |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| time to 80 % safe (s) | env steps to 80 % safe | env steps per s | source | command |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in doc["groups"]:
     for r in g["runs"]:
       s = r["scores"]
       lines.append(f"| {r['trainer']} | {r['reward']} | {r['settings']} | {r['seed']} | {r['device']} | "
                    f"{r['env_steps'] / 1e6:.1f} M | {100 * s['completion']:.1f} % | {100 * s['safe_completion']:.1f} % | "
-                   f"{_run_t80(r)} | {r['source']} | `{r['command']}` |")
+                   f"{_run_t80(r)} | {_run_s80(r)} | {_run_rate(r)} | {r['source']} | `{r['command']}` |")
   return "\n".join(lines) + "\n"
 
 

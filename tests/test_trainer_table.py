@@ -1,4 +1,4 @@
-"""benchmarks/trainer_table.py: one table of several trainers' results files (no training, no JAX)."""
+"""benchmarks/trainer_table.py: one table of several trainers' results files (no training, no task code)."""
 
 import importlib.util
 import json
@@ -161,7 +161,15 @@ def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
   assert g[T.BRAX]["time_to_80_safe"] == dict(scored=1, reached=1, mean=200.0, min=200.0, max=200.0, shared=0)
   md = open(out + ".md").read()
   assert "| 150 (120–180), 2 / 3 reached |" in md and "| 200, 1 / 1 reached (2 not scored) |" in md
-  assert "| not reached |" in md and md.count("| not scored |") == 2
+  assert sorted(_column(md, "time to 80 % safe (s)")) == ["120", "180", "200", "not reached", "not scored", "not scored"]
+
+
+def _column(md: str, name: str) -> list[str]:
+  """The cells of column ``name`` in the table of every run (the second table of ``md``)."""
+  table = [line for line in md.split("Every run:", 1)[1].splitlines() if line.startswith("|")]
+  cells = lambda line: [c.strip() for c in line.strip("|").split(" | ")]  # noqa: E731
+  i = cells(table[0]).index(name)
+  return [cells(line)[i] for line in table[2:]]
 
 
 def _brax_table(tmp_path, rows) -> str:
@@ -196,12 +204,13 @@ def test_a_group_of_alone_and_shared_runs_times_the_alone_ones(tmp_path):
   rows = [dict(_brax_row(2.0, s, (1.0, 0.95)), time_to_80_safe_s=100.0 + s, scored_curve=curve,
                card_shared_by=3 if s < 2 else 1) for s in (0, 1, 2)]
   md = open(_brax_table(tmp_path, rows) + ".md").read()
-  assert "| 102, 1 / 1 reached (2 not timed (device shared)) |" in md and "not scored" not in md
+  assert "| 102, 1 / 1 reached (2 not timed (device shared)) |" in md
+  assert not any("not scored" in c for c in _column(md, "time to 80 % safe (s)"))
 
 
 def test_files_from_before_the_panda_default_group_with_runs_naming_the_gripper(tmp_path):
   """A results file naming no robot ran the gripper (the default then): it groups with one naming it, not the Panda's."""
-  import tasks  # the registry's rule, which this JAX-free script copies
+  import tasks  # the registry's rule, which this script copies rather than load the task code
   assert T.UNNAMED_ROBOT == tasks.UNNAMED_ROBOT
   old = {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
          "rows": [_brax_row(2.0, 0, (1.0, 0.9))]}
@@ -239,3 +248,49 @@ def test_a_run_with_the_std_a_parameter_or_another_kl_rule_is_its_own_group(tmp_
   assert ours[1][1] == pytest.approx(0.95)
   (paper,) = [g for g in groups if g["trainer"] == T.PAPER]
   assert "std a parameter" in paper["settings"] and "target-KL rule epoch" in paper["settings"]
+
+
+def _evals(seed, points, keys=("eval/safe_completion", "eval/completion", "wall_time")):
+  """Evaluation rows of one run: ``points`` [(env steps, safe, completion, clock s)]."""
+  safe, completion, clock = keys
+  return [dict(seed=seed, env_steps=n, **{safe: s, completion: c, clock: t}) for n, s, c, t in points]
+
+
+def test_env_steps_to_80_safe_counts_each_runs_own_steps_on_any_device(tmp_path):
+  """The first evaluation by the mode with ≥ 80 % safe and ≥ 80 % completion, in the run's own env steps: ours
+  from its history (per seed), Brax's from its scored curve, a run that shared its device counted too (its
+  steps are its own; only its seconds and rate are not); a curve scored by another action is not scored."""
+  row = _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.95), (1.0, 0.9)), (1, (1.0, 0.5), (1.0, 0.85))])
+  row["history"] = (_evals(0, [(3_000_000, 0.5, 0.9, 100.0), (6_000_000, 0.85, 0.8, 160.0), (6_300_000, 0.9, 0.9, 170.0)])
+                    + _evals(1, [(3_000_000, 0.9, 0.5, 100.0), (6_000_000, 0.5, 0.9, 160.0), (6_300_000, 0.7, 1.0, 170.0)]))
+  brax_keys = ("safe_completion", "completion", "wall_s")
+  curve = lambda action, pts: {"action": action, "episodes": 256, "points": _evals(0, pts, brax_keys)}  # noqa: E731
+  alone = dict(_brax_row(2.0, 0, (1.0, 0.99)), scored_curve=curve("mode", [(0, 0.0, 0.0, 30.0), (3_300_000, 0.8, 0.8, 100.0),
+                                                                        (6_600_000, 1.0, 1.0, 165.0)]))
+  shared = dict(_brax_row(2.0, 1, (1.0, 0.99)), card_shared_by=3,
+                scored_curve=curve("mode", [(0, 0.0, 0.0, 30.0), (3_300_000, 0.0, 0.0, 200.0), (6_600_000, 0.9, 0.9, 400.0)]))
+  by_sample = dict(_brax_row(2.0, 2, (1.0, 0.99)), scored_curve=curve("sample", [(0, 0.0, 0.0, 30.0), (3_300_000, 1.0, 1.0, 99.0)]))
+  docs = {"ours.json": {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "rows": [row]},
+          "brax.json": {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+                        "rows": [alone, shared, by_sample]}}
+  paths = []
+  for name, doc in docs.items():
+    paths.append(str(tmp_path / name))
+    with open(paths[-1], "w") as f:
+      json.dump(doc, f)
+  out = str(tmp_path / "table")
+  assert T.main(["--task", "place_plate", "--sources", *paths, "--out", out]) == 0
+  with open(out + ".json") as f:
+    g = {x["trainer"]: x for x in json.load(f)["groups"]}
+  assert g["ours (playground preset)"]["env_steps_to_80_safe"] == dict(scored=2, reached=1, mean=6_000_000,
+                                                                       min=6_000_000, max=6_000_000)
+  assert g[T.BRAX]["env_steps_to_80_safe"] == dict(scored=2, reached=2, mean=4_950_000, min=3_300_000, max=6_600_000)
+  runs = {(r["trainer"], r["seed"]): r for x in g.values() for r in x["runs"]}
+  assert runs[("ours (playground preset)", 0)]["grain"] == 3_000_000  # the median spacing, not the last call's 0.3 M
+  assert runs[("ours (playground preset)", 0)]["rate"] == pytest.approx(6_300_000 / 170.0)
+  assert runs[(T.BRAX, 0)]["rate"] == pytest.approx(6_600_000 / 165.0) and runs[(T.BRAX, 1)]["rate"] is None
+  assert not runs[(T.BRAX, 2)]["s80_scored"]
+  md = open(out + ".md").read()
+  assert "| 6.0 M, 1 / 2 reached |" in md and "| 5.0 (3.3–6.6) M, 2 / 2 reached (1 not scored) |" in md
+  assert "| 6.0 M (evaluations every 3.0 M) | 37 k |" in md and "| not reached (evaluations every 3.0 M) | 37 k |" in md
+  assert "| 6.6 M (evaluations every 3.3 M) | — |" in md and "| 3.3 M (evaluations every 3.3 M) | 40 k |" in md
