@@ -163,6 +163,8 @@ def method_spec(name: str, args) -> dict:
                 max_grad_norm=clip)
   if args.obs_clip is not None:
     spec = dict(spec, label=spec["label"] + f", observations clipped at ±{args.obs_clip:g}", obs_clip=args.obs_clip)
+  if args.gae_per_iteration:
+    spec = dict(spec, label=spec["label"] + ", GAE once per iteration", gae_per_iteration=True)
   if args.redraw_starts_steps:
     spec = dict(spec, label=spec["label"] + f", starts redrawn every {args.redraw_starts_steps:.3g} steps",
                 redraw_starts_steps=int(args.redraw_starts_steps))
@@ -239,6 +241,9 @@ def parse(argv):
                       "Playground's PandaPickCube recipe keeps) (default: the preset's)")
   p.add_argument("--obs-clip", type=float, default=None, metavar="X",
                  help="every method: bound on |normalised observation| (default: none, brax's normaliser unbounded)")
+  p.add_argument("--gae-per-iteration", action="store_true",
+                 help="every method: advantages and value targets computed once per iteration, before the epochs "
+                      "(CleanRL, SB3; train.iteration_targets), not brax's moving ones")
   p.add_argument("--budget", type=float, default=2.0, help="episode-cost budget ĉ of the Lagrangian methods")
   p.add_argument("--cost-critic", action="store_true",
                  help="damage-aware methods: separate reward and cost critics (train.constrained_loss)")

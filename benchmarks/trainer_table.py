@@ -221,6 +221,7 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
         f"starts redrawn every {kw['redraw_starts_steps'] / 1e6:g} M steps" if kw.get("redraw_starts_steps") else "",
         _clip(kw["max_grad_norm"]) if "max_grad_norm" in kw else "",
         _obs_clip(kw["obs_clip"]) if kw.get("obs_clip") is not None else "",
+        "GAE once per iteration" if kw.get("gae_per_iteration") else "",
         _matmuls(r))
         if x)
     head = (r.get("eval_actions") or ["mode"])[0]

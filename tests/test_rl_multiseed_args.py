@@ -292,6 +292,14 @@ def test_obs_clip_reaches_every_method_and_its_label():
   assert "obs_clip" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
 
 
+def test_gae_per_iteration_reaches_every_method_and_its_label():
+  a = rl_multiseed.parse(["--methods", "task_only,penalty,paper", "--gae-per-iteration"])
+  for name in ("task_only", "penalty", "paper"):
+    spec = rl_multiseed.method_spec(name, a)
+    assert spec["gae_per_iteration"] is True and "GAE once per iteration" in spec["label"]
+  assert "gae_per_iteration" not in rl_multiseed.method_spec("penalty", rl_multiseed.parse([]))
+
+
 def test_target_kl_rule_reaches_the_paper_methods_only():
   a = rl_multiseed.parse(["--methods", "paper,paper_task_only,penalty", "--target-kl-rule", "epoch"])
   for m in ("paper", "paper_task_only"):

@@ -294,3 +294,17 @@ def test_env_steps_to_80_safe_counts_each_runs_own_steps_on_any_device(tmp_path)
   assert "| 6.0 M, 1 / 2 reached |" in md and "| 5.0 (3.3–6.6) M, 2 / 2 reached (1 not scored) |" in md
   assert "| 6.0 M (evaluations every 3.0 M) | 37 k |" in md and "| not reached (evaluations every 3.0 M) | 37 k |" in md
   assert "| 6.6 M (evaluations every 3.3 M) | — |" in md and "| 3.3 M (evaluations every 3.3 M) | 40 k |" in md
+
+
+def test_a_run_with_targets_once_per_iteration_is_its_own_group(tmp_path):
+  """gae_per_iteration changes the critic's targets: such runs are not pooled with brax-style ones."""
+  doc = {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "eval_episodes": 1024,
+         "rows": [_ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.9), (1.0, 0.9))]),
+                  _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.5), (1.0, 0.5))], gae_per_iteration=True)]}
+  path, out = str(tmp_path / "ours.json"), str(tmp_path / "table")
+  with open(path, "w") as f:
+    json.dump(doc, f)
+  assert T.main(["--task", "place_plate", "--sources", path, "--out", out]) == 0
+  with open(out + ".json") as f:
+    groups = json.load(f)["groups"]
+  assert sorted("GAE once per iteration" in g["settings"] for g in groups) == [False, True]

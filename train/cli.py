@@ -121,6 +121,9 @@ CONFIG_FLAGS = (
     ("--pid-ki", "pid_ki", float, "PID-Lagrangian integral gain"),
     ("--pid-kd", "pid_kd", float, "PID-Lagrangian derivative gain (rising cost only)"),
     ("--cost-critic", "cost_critic", _bool, "true: separate reward and cost critics, advantages mixed with λ"),
+    ("--gae-per-iteration", "gae_per_iteration", _bool,
+     "true: advantages and value targets computed once per iteration, before the epochs (CleanRL, SB3); false: "
+     "brax's, recomputed with the critic being trained at every minibatch step"),
     ("--budget-anneal-steps", "budget_anneal_steps", _int,
      "budget curriculum: ĉ falls linearly from the first measured episode cost to --budget over this many env "
      "steps per seed (0: --budget from the start)"),

@@ -148,6 +148,10 @@ class PPOConfig:
   # Separate value estimates for task reward and cost, advantages mixed with the current λ
   # (train.constrained_loss) instead of one critic on the shaped reward.
   cost_critic: bool = False
+  # GAE advantages and value targets computed once per iteration from the critic the rollout ended with,
+  # and kept for every epoch (CleanRL, SB3, purejaxrl; train.iteration_targets). False: brax's loss,
+  # which recomputes them at every minibatch step with the critic being trained (moving targets).
+  gae_per_iteration: bool = False
   num_eval_envs: int = 128
   eval_every: int = 0  # env steps between evaluations; 0 → only at the end
   checkpoint_every: int = 0  # env steps between checkpoints; 0 → only at the end
@@ -314,7 +318,7 @@ class PPOConfig:
       raise ValueError(f"budget_anneal_steps: must be an integer >= 0 (env steps per seed), got {v!r}")
     if v and self.budget is None:
       raise ValueError("budget_anneal_steps: anneals the Lagrangian's budget; set budget too (got budget=None)")
-    for name in ("cost_critic", "update_normalizer", "normalizer_after_update", "anneal_entropy"):
+    for name in ("cost_critic", "update_normalizer", "normalizer_after_update", "anneal_entropy", "gae_per_iteration"):
       if not isinstance(getattr(self, name), bool):
         raise ValueError(f"{name}: true or false, got {getattr(self, name)!r}")
     if self.multiplier not in MULTIPLIERS:
@@ -352,7 +356,7 @@ class PPOConfig:
            "value_cost": 0.5, "budget_anneal_steps": 0,
            "cost_critic": False, "update_normalizer": True, "normalizer_after_update": False,
            "target_kl_rule": "minibatch", "policy_std": "state", "anneal_entropy": False,
-           "redraw_starts_steps": 0, "obs_clip": None}
+           "redraw_starts_steps": 0, "obs_clip": None, "gae_per_iteration": False}
     return cls(**{**old, **{k: v for k, v in d.items() if k in names}})
 
 

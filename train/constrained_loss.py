@@ -50,6 +50,55 @@ def combine_advantages(adv_r, adv_c, cost_weight, lam):
   return (adv_r - (cost_weight + lam) * adv_c) / (1.0 + lam)
 
 
+def head_targets(data: types.Transition, values, bootstrap, *, discounting: float, gae_lambda: float,
+                 reward_scaling: float):
+  """GAE of each critic head (brax's ``compute_gae``, its termination vs time-limit handling) →
+  ``(vs, advantages)``, f32[T, B, H] each.
+
+  ``data``: Transitions time-major [T, B]; ``values`` f32[T, B, H] and ``bootstrap`` f32[B, H] (the value of
+  each sequence's last next-observation): H = 2 (reward, cost; the cost is
+  ``extras["state_extras"]["cost"]``) with a cost critic, H = 1 with one critic on ``data.reward``.
+  """
+  truncation = data.extras["state_extras"]["truncation"]
+  termination = (1 - data.discount) * (1 - truncation)
+  rewards = (data.reward, data.extras["state_extras"]["cost"])[:values.shape[-1]]
+  out = [ppo_losses.compute_gae(truncation=truncation, termination=termination, rewards=r * reward_scaling,
+                                values=values[..., h], bootstrap_value=bootstrap[..., h], lambda_=gae_lambda,
+                                discount=discounting) for h, r in enumerate(rewards)]
+  return jnp.stack([vs for vs, _ in out], -1), jnp.stack([adv for _, adv in out], -1)
+
+
+def loss_from_targets(ppo_network: ppo_networks.PPONetworks, logits, values, vs, advantages,
+                      data: types.Transition, rng, cost_weight, lam, *, entropy_cost: float,
+                      clipping_epsilon: float, vf_coefficient: float):
+  """Clipped-surrogate PPO loss given the value targets ``vs`` and ``advantages`` of each head → (loss, metrics).
+
+  ``logits`` f32[T, B, ·] and ``values`` f32[T, B, H]: the networks' outputs under the parameters being
+  trained; ``vs``, ``advantages`` f32[T, B, H] (:func:`head_targets`); ``data`` time-major [T, B]. Two heads:
+  the advantages mixed with w and λ (:func:`combine_advantages`), each head's value loss, the cost head's
+  logged as ``cost_v_loss``; one head: brax's ``compute_ppo_loss`` term by term. Advantages are normalised
+  over the minibatch, as brax's.
+  """
+  dist = ppo_network.parametric_action_distribution
+  two = values.shape[-1] == 2
+  adv = combine_advantages(advantages[..., 0], advantages[..., 1], cost_weight, lam) if two else advantages[..., 0]
+  adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+  rho = jnp.exp(dist.log_prob(logits, data.extras["policy_extras"]["raw_action"])
+                - data.extras["policy_extras"]["log_prob"])
+  policy_loss = -jnp.mean(jnp.minimum(rho * adv, jnp.clip(rho, 1 - clipping_epsilon, 1 + clipping_epsilon) * adv))
+  v_loss = 0.5 * vf_coefficient * jnp.mean((vs - values) ** 2, axis=(0, 1))  # f32[H]
+  entropy_loss = -entropy_cost * jnp.mean(dist.entropy(logits, rng))
+  total = policy_loss + jnp.sum(v_loss) + entropy_loss
+  new = dist.create_dist(logits)
+  old = dist.create_dist(data.extras["policy_extras"]["distribution_params"])
+  metrics = {
+      "total_loss": total, "policy_loss": policy_loss, "v_loss": jnp.sum(v_loss),
+      "entropy_loss": entropy_loss, "kl_mean": jnp.mean(new.kl_divergence(old)),
+      "policy_dist_mean_std": jnp.mean(new.scale),
+  }
+  return total, (dict(metrics, cost_v_loss=v_loss[1]) if two else metrics)
+
+
 def compute_loss(params: ppo_losses.PPONetworkParams, normalizer_params, data: types.Transition, rng,
                  cost_weight, lam, *, ppo_network: ppo_networks.PPONetworks, entropy_cost: float,
                  discounting: float, reward_scaling: float, gae_lambda: float, clipping_epsilon: float,
@@ -58,36 +107,16 @@ def compute_loss(params: ppo_losses.PPONetworkParams, normalizer_params, data: t
 
   ``data``: Transitions [B, T] whose ``reward`` is the task reward and whose
   ``extras["state_extras"]["cost"]`` is the damage cost of each step; ``cost_weight`` w and
-  ``lam`` λ: f32[] (traced, so one program serves every multiplier value).
+  ``lam`` λ: f32[] (traced, so one program serves every multiplier value). GAE is computed here, with
+  the critic being trained (brax's way: the targets move with every SGD step; train.iteration_targets
+  computes them once per iteration instead).
   """
-  dist = ppo_network.parametric_action_distribution
   data = jax.tree.map(lambda x: jnp.swapaxes(x, 0, 1), data)  # [T, B, ...]
   logits = ppo_network.policy_network.apply(normalizer_params, params.policy, data.observation)
   values = ppo_network.value_network.apply(normalizer_params, params.value, data.observation)  # [T, B, 2]
   bootstrap = ppo_network.value_network.apply(normalizer_params, params.value, data.next_observation[-1])  # [B, 2]
-  truncation = data.extras["state_extras"]["truncation"]
-  termination = (1 - data.discount) * (1 - truncation)
-
-  def gae(rewards, head):
-    return ppo_losses.compute_gae(truncation=truncation, termination=termination, rewards=rewards,
-                                  values=values[..., head], bootstrap_value=bootstrap[..., head],
-                                  lambda_=gae_lambda, discount=discounting)
-
-  vs_r, adv_r = gae(data.reward * reward_scaling, 0)
-  vs_c, adv_c = gae(data.extras["state_extras"]["cost"] * reward_scaling, 1)
-  adv = combine_advantages(adv_r, adv_c, cost_weight, lam)
-  adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-  rho = jnp.exp(dist.log_prob(logits, data.extras["policy_extras"]["raw_action"])
-                - data.extras["policy_extras"]["log_prob"])
-  policy_loss = -jnp.mean(jnp.minimum(rho * adv, jnp.clip(rho, 1 - clipping_epsilon, 1 + clipping_epsilon) * adv))
-  v_loss_r = 0.5 * vf_coefficient * jnp.mean((vs_r - values[..., 0]) ** 2)
-  v_loss_c = 0.5 * vf_coefficient * jnp.mean((vs_c - values[..., 1]) ** 2)
-  entropy_loss = -entropy_cost * jnp.mean(dist.entropy(logits, rng))
-  total = policy_loss + v_loss_r + v_loss_c + entropy_loss
-  new = dist.create_dist(logits)
-  old = dist.create_dist(data.extras["policy_extras"]["distribution_params"])
-  return total, {
-      "total_loss": total, "policy_loss": policy_loss, "v_loss": v_loss_r + v_loss_c, "cost_v_loss": v_loss_c,
-      "entropy_loss": entropy_loss, "kl_mean": jnp.mean(new.kl_divergence(old)),
-      "policy_dist_mean_std": jnp.mean(new.scale),
-  }
+  vs, adv = head_targets(data, values, bootstrap, discounting=discounting, gae_lambda=gae_lambda,
+                         reward_scaling=reward_scaling)
+  return loss_from_targets(ppo_network, logits, values, vs, adv, data, rng, cost_weight, lam,
+                           entropy_cost=entropy_cost, clipping_epsilon=clipping_epsilon,
+                           vf_coefficient=vf_coefficient)

@@ -5,7 +5,8 @@ E envs (``lax.scan``), reward shaping with the multiplier the rollout was
 collected under, multiplier update, observation-normaliser update, then
 ``num_updates_per_batch`` epochs of ``num_minibatches`` minibatches (nested
 ``lax.scan``; with ``normalizer_after_update`` the epochs use the statistics the
-rollout was collected under); GAE and the clipped loss are brax's ``compute_ppo_loss``.
+rollout was collected under); GAE and the clipped loss are brax's ``compute_ppo_loss``
+(with ``gae_per_iteration`` GAE runs once, before the epochs: train.iteration_targets).
 Nothing here loops in Python and nothing depends on the seed count: the run
 loop (train.ppo) vmaps this function over a leading seed axis of the whole
 :class:`TrainState` and jits it once, so S seeds are one program and one call
@@ -57,6 +58,7 @@ from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 
 from train import evaluate as E
+from train import iteration_targets as IT
 from train import memory as MEM
 from train import multipliers as M
 from train import networks as N
@@ -349,6 +351,10 @@ class Trainer:
     # brax's order normalises the epochs' inputs with the statistics just updated; SB3's (config
     # normalizer_after_update) with those the rollout's logits were computed under.
     sgd_normalizer = ts.normalizer if self.cfg.normalizer_after_update else normalizer
+    if self.cfg.gae_per_iteration:  # fixed targets for every epoch, from the critic the rollout ended with
+      data = IT.attach(self.network, sgd_normalizer, ts.params.value, data, cost_critic=self.cfg.cost_critic,
+                       discounting=self.cfg.discounting, gae_lambda=self.cfg.gae_lambda,
+                       reward_scaling=self.cfg.reward_scaling)
     (params, opt_state, _), (metrics, taken) = jax.lax.scan(
         functools.partial(self._epoch, sgd_normalizer, weights, ts.params.policy, data),
         (ts.params, ts.opt_state, jnp.zeros((), bool)),

@@ -30,6 +30,7 @@ from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 
 from train import constrained_loss as CL
+from train import iteration_targets as IT
 from train.config import PPOConfig
 
 ACTIVATIONS: dict[str, Callable] = {
@@ -166,7 +167,12 @@ def make_gradient_update(network, optimizer, cfg: PPOConfig, axis_name: Optional
   common = dict(ppo_network=network, discounting=cfg.discounting,
                 reward_scaling=cfg.reward_scaling, gae_lambda=cfg.gae_lambda,
                 clipping_epsilon=cfg.clipping_epsilon, vf_coefficient=cfg.value_cost)
-  if cfg.cost_critic:
+  if cfg.gae_per_iteration:  # the targets were computed before the epochs (train.iteration_targets.attach)
+    def loss_fn(params, normalizer, data, rng, cost_weight, lam, entropy_cost):
+      return IT.compute_loss(params, normalizer, data, rng, cost_weight, lam, ppo_network=network,
+                             cost_critic=cfg.cost_critic, entropy_cost=entropy_cost,
+                             clipping_epsilon=cfg.clipping_epsilon, vf_coefficient=cfg.value_cost)
+  elif cfg.cost_critic:
     def loss_fn(params, normalizer, data, rng, cost_weight, lam, entropy_cost):
       return CL.compute_loss(params, normalizer, data, rng, cost_weight, lam, entropy_cost=entropy_cost, **common)
   else:
