@@ -133,6 +133,22 @@ def test_unknown_action_and_missing_file_are_refused(tmp_path, capsys, sources):
   assert "--sources: cannot read" in capsys.readouterr().err
 
 
+def _h200_table(tmp_path, ours_rows, brax_rows):
+  """One results file of ours and one of Brax's (one H200 each), tabled by the mode → (groups by trainer, md)."""
+  docs = {"ours.json": {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "rows": ours_rows},
+          "brax.json": {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
+                        "rows": brax_rows}}
+  paths = []
+  for name, doc in docs.items():
+    paths.append(str(tmp_path / name))
+    with open(paths[-1], "w") as f:
+      json.dump(doc, f)
+  out = str(tmp_path / "table")
+  assert T.main(["--task", "place_plate", "--sources", *paths, "--out", out]) == 0
+  with open(out + ".json") as f:
+    return {x["trainer"]: x for x in json.load(f)["groups"]}, open(out + ".md").read()
+
+
 def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
   """Ours: each seed's time from its periodic evaluations (None: never reached); Brax: only rows with a
   scored curve by the mode (rl_brax_ppo.py --curve-episodes) are timed, earlier rows count as not scored."""
@@ -144,22 +160,10 @@ def test_time_to_80_safe_per_group_counts_reached_and_unscored_runs(tmp_path):
                scored_curve={"action": "mode", "episodes": 256, "points": []})
   by_sample = dict(_brax_row(2.0, 1, (1.0, 0.99)), time_to_80_safe_s=90.0,
                    scored_curve={"action": "sample", "episodes": 256, "points": []})
-  docs = {"ours.json": {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "rows": [row]},
-          "brax.json": {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
-                        "rows": [timed, by_sample, _brax_row(2.0, 2, (1.0, 0.9))]}}
-  paths = []
-  for name, doc in docs.items():
-    paths.append(str(tmp_path / name))
-    with open(paths[-1], "w") as f:
-      json.dump(doc, f)
-  out = str(tmp_path / "table")
-  T.main(["--task", "place_plate", "--sources", *paths, "--out", out])
-  with open(out + ".json") as f:
-    g = {x["trainer"]: x for x in json.load(f)["groups"]}
+  g, md = _h200_table(tmp_path, [row], [timed, by_sample, _brax_row(2.0, 2, (1.0, 0.9))])
   assert g["ours (playground preset)"]["time_to_80_safe"] == dict(scored=3, reached=2, mean=150.0, min=120.0, max=180.0,
                                                                  shared=0)
   assert g[T.BRAX]["time_to_80_safe"] == dict(scored=1, reached=1, mean=200.0, min=200.0, max=200.0, shared=0)
-  md = open(out + ".md").read()
   assert "| 150 (120–180), 2 / 3 reached |" in md and "| 200, 1 / 1 reached (2 not scored) |" in md
   assert sorted(_column(md, "time to 80 % safe (s)")) == ["120", "180", "200", "not reached", "not scored", "not scored"]
 
@@ -270,18 +274,7 @@ def test_env_steps_to_80_safe_counts_each_runs_own_steps_on_any_device(tmp_path)
   shared = dict(_brax_row(2.0, 1, (1.0, 0.99)), card_shared_by=3,
                 scored_curve=curve("mode", [(0, 0.0, 0.0, 30.0), (3_300_000, 0.0, 0.0, 200.0), (6_600_000, 0.9, 0.9, 400.0)]))
   by_sample = dict(_brax_row(2.0, 2, (1.0, 0.99)), scored_curve=curve("sample", [(0, 0.0, 0.0, 30.0), (3_300_000, 1.0, 1.0, 99.0)]))
-  docs = {"ours.json": {"device": "NVIDIA H200 (gpu, 1 device(s))", "task": "place_plate", "rows": [row]},
-          "brax.json": {"task": "place_plate", "device": "NVIDIA H200", "recipe": {}, "task_settings": {"obs_mode": "paper"},
-                        "rows": [alone, shared, by_sample]}}
-  paths = []
-  for name, doc in docs.items():
-    paths.append(str(tmp_path / name))
-    with open(paths[-1], "w") as f:
-      json.dump(doc, f)
-  out = str(tmp_path / "table")
-  assert T.main(["--task", "place_plate", "--sources", *paths, "--out", out]) == 0
-  with open(out + ".json") as f:
-    g = {x["trainer"]: x for x in json.load(f)["groups"]}
+  g, md = _h200_table(tmp_path, [row], [alone, shared, by_sample])
   assert g["ours (playground preset)"]["env_steps_to_80_safe"] == dict(scored=2, reached=1, mean=6_000_000,
                                                                        min=6_000_000, max=6_000_000)
   assert g[T.BRAX]["env_steps_to_80_safe"] == dict(scored=2, reached=2, mean=4_950_000, min=3_300_000, max=6_600_000)
@@ -290,7 +283,6 @@ def test_env_steps_to_80_safe_counts_each_runs_own_steps_on_any_device(tmp_path)
   assert runs[("ours (playground preset)", 0)]["rate"] == pytest.approx(6_300_000 / 170.0)
   assert runs[(T.BRAX, 0)]["rate"] == pytest.approx(6_600_000 / 165.0) and runs[(T.BRAX, 1)]["rate"] is None
   assert not runs[(T.BRAX, 2)]["s80_scored"]
-  md = open(out + ".md").read()
   assert "| 6.0 M, 1 / 2 reached |" in md and "| 5.0 (3.3–6.6) M, 2 / 2 reached (1 not scored) |" in md
   assert "| 6.0 M (evaluations every 3.0 M) | 37 k |" in md and "| not reached (evaluations every 3.0 M) | 37 k |" in md
   assert "| 6.6 M (evaluations every 3.3 M) | — |" in md and "| 3.3 M (evaluations every 3.3 M) | 40 k |" in md
