@@ -123,6 +123,12 @@ def _summary(r: dict) -> dict:
               safe_80=sum(x >= 0.8 for x in safe))
 
 
+def _setting(r: dict) -> str:
+  """A run's first three cells: learning rate, gradient clip, targets."""
+  clip = "none" if r["max_grad_norm"] is None else f"{r['max_grad_norm']:g}"
+  return f"| {r['learning_rate']:g} | {clip} | {'per iteration' if r['gae_per_iteration'] else 'moving'} |"
+
+
 def render_md(res: dict) -> str:
   lines = [
       "# Moving or fixed value targets under a stress learning rate (PusherEnv, CPU)", "",
@@ -141,9 +147,7 @@ def render_md(res: dict) -> str:
       "|---|---|---|---|---|---|---|---|---|"]
   for r in res["runs"]:
     s = _summary(r)
-    clip = "none" if r["max_grad_norm"] is None else f"{r['max_grad_norm']:g}"
-    lines.append(f"| {r['learning_rate']:g} | {clip} | {'per iteration' if r['gae_per_iteration'] else 'moving'} | "
-                 f"{s['diverged']} / {s['seeds']} | {s['past_floor']} / {s['seeds']} | "
+    lines.append(f"{_setting(r)} {s['diverged']} / {s['seeds']} | {s['past_floor']} / {s['seeds']} | "
                  f"{s['median_largest']:.3g} / {s['max_largest']:.3g} | "
                  f"{100 * s['safe_mean']:.1f} % ({100 * s['safe_min']:.0f}–{100 * s['safe_max']:.0f}) | "
                  f"{s['safe_80']} / {s['seeds']} | {r['seconds']:.0f} |")
@@ -151,13 +155,10 @@ def render_md(res: dict) -> str:
             "| learning rate | gradient clip | targets | seed | value loss at each point | diverged at | final |",
             "|---|---|---|---|---|---|---|"]
   for r in res["runs"]:
-    clip = "none" if r["max_grad_norm"] is None else f"{r['max_grad_norm']:g}"
     for p in r["per_seed"]:
       d = p["diverged"]
       at = "—" if d is None else f"{d['env_steps']:,} steps ({d['value_loss']:.3g})"
-      lines.append(f"| {r['learning_rate']:g} | {clip} | {'per iteration' if r['gae_per_iteration'] else 'moving'} | "
-                   f"{p['seed']} | {', '.join(f'{v:.3g}' for v in p['value_loss'])} | "
-                   f"{at} | "
+      lines.append(f"{_setting(r)} {p['seed']} | {', '.join(f'{v:.3g}' for v in p['value_loss'])} | {at} | "
                    f"{100 * p['completion']:.0f} / {100 * p['safe_completion']:.0f} % |")
   return "\n".join(lines) + "\n"
 
