@@ -406,6 +406,9 @@ def test_critic_divergence_message_names_the_seeds_whose_value_loss_leapt():
   msg = ppo.critic_divergence_message(v, low, (0, 1, 2), 36, 5898240)
   assert "seed 0: 2.1e+15, its lowest 2.44" in msg and "seed 1" not in msg and "seed 2" not in msg
   assert "iteration 36 (5.9 M env steps" in msg
+  assert "--gae-per-iteration true" in msg  # where the run could go next
+  fixed = ppo.critic_divergence_message(v, low, (0, 1, 2), 36, 5898240, fixed_targets=True)
+  assert "already computes its value targets once per iteration" in fixed and "--gae-per-iteration" not in fixed
   assert ppo.critic_divergence_message(v, np.full(3, np.inf), (0, 1, 2), 1, 0) is None  # nothing to compare with
   assert ppo.critic_divergence_message(np.array([2e9]), np.array([1e-3]), (4,), 9, 9) is not None
   assert ppo.critic_divergence_message(np.array([2e9]), np.array([1e4]), (4,), 9, 9) is None  # 2e5-fold

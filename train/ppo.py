@@ -137,8 +137,10 @@ def critic_diverged(v_loss, v_low) -> np.ndarray:
   return (v > V_FLOOR) & (v > V_JUMP * low)
 
 
-def critic_divergence_message(v_loss, v_low, seeds, iteration: int, env_steps: int) -> Optional[str]:
-  """What to warn when :func:`critic_diverged` holds for a seed at this iteration; None otherwise."""
+def critic_divergence_message(v_loss, v_low, seeds, iteration: int, env_steps: int,
+                              fixed_targets: bool = False) -> Optional[str]:
+  """What to warn when :func:`critic_diverged` holds for a seed at this iteration; None otherwise.
+  ``fixed_targets``: the run computes its value targets once per iteration (config ``gae_per_iteration``)."""
   v, low = np.asarray(v_loss, np.float64), np.asarray(v_low, np.float64)
   bad = critic_diverged(v, low)
   if not np.any(bad):
@@ -147,8 +149,14 @@ def critic_divergence_message(v_loss, v_low, seeds, iteration: int, env_steps: i
   return (f"the critic diverged at iteration {iteration} ({env_steps / 1e6:.1f} M env steps per seed): value loss "
           f"{which}. Its predictions have left the range of the task's returns, so the advantages the policy "
           f"learns from are noise until it recovers, if it does (a seed of ours on Place Plate never completed "
-          f"an episode again; docs/safe_rl.md, \"A second draw of the driver\"). A rerun is what has mended it "
-          f"so far. Warned once per run; loss/v_loss is logged every row.")
+          f"an episode again; docs/safe_rl.md, \"A second draw of the driver\"). "
+          + ("This run already computes its value targets once per iteration (gae_per_iteration); a rerun is what "
+             "has mended it so far. "
+             if fixed_targets else
+             "Value targets computed once per iteration (gae_per_iteration, --gae-per-iteration true) removed "
+             "the divergence a CPU stress test shows (benchmarks/critic_targets.py); on Place Plate a rerun is "
+             "what has mended it so far. ")
+          + "Warned once per run; loss/v_loss is logged every row.")
 
 
 def non_finite_losses(m: dict, seeds) -> dict:
@@ -459,7 +467,8 @@ def train(task, *, preset: str = "playground", seeds=None, seed: Optional[int] =
           warned_z = True
       if "loss/v_loss" in m:
         v = np.asarray(m["loss/v_loss"], np.float64)
-        if not warned_v and (msg := critic_divergence_message(v, v_low, cfg.seeds, iteration, iteration * spi)):
+        if not warned_v and (msg := critic_divergence_message(v, v_low, cfg.seeds, iteration, iteration * spi,
+                                                                      cfg.gae_per_iteration)):
           warnings.warn(msg, CriticDivergedWarning, stacklevel=2)
           warned_v = True
         v_low = np.minimum(v_low, v)
