@@ -69,6 +69,9 @@ def parse(argv=None):
                  help="learning rate and per-network gradient clip (or none) of each setting")
   p.add_argument("--timesteps", type=int, default=64_000, help="env steps per seed of each run")
   p.add_argument("--evals", type=int, default=10, help="periodic evaluations per run (the logged points)")
+  p.add_argument("--cost-critic", action="store_true",
+                 help="a critic with a reward and a cost head, advantages mixed with w (train.constrained_loss), "
+                      "as the Place Plate recipe trains")
   p.add_argument("--out", default=os.path.join(provenance.ROOT, "benchmarks", "results", "critic_targets_pusher"))
   a = p.parse_args(argv)
   try:
@@ -91,12 +94,13 @@ def parse(argv=None):
 
 
 def run(seeds, lr: float, clip: float | None, gae_per_iteration: bool, timesteps: int, evals: int,
-        per_iteration: int) -> dict:
+        per_iteration: int, cost_critic: bool = False) -> dict:
   """One training run of all ``seeds`` → its settings, seconds and per-seed outcome."""
   every = max(1, timesteps // per_iteration // evals) * per_iteration
   t0 = time.perf_counter()
   res = train.train(PusherEnv(), seeds=tuple(seeds), learning_rate=lr, max_grad_norm=clip,
-                    gae_per_iteration=gae_per_iteration, num_timesteps=timesteps, eval_every=every, **RUN)
+                    gae_per_iteration=gae_per_iteration, cost_critic=cost_critic, num_timesteps=timesteps,
+                    eval_every=every, **RUN)
   seconds = time.perf_counter() - t0
   per_seed = []
   for s in seeds:
@@ -109,8 +113,8 @@ def run(seeds, lr: float, clip: float | None, gae_per_iteration: bool, timesteps
         largest_value_loss=max(v for _, v in points), past_floor=max(v for _, v in points) > V_FLOOR,
         completion=rows[-1]["eval/completion"],
         safe_completion=rows[-1]["eval/safe_completion"]))
-  return dict(learning_rate=lr, max_grad_norm=clip, gae_per_iteration=gae_per_iteration, seconds=round(seconds, 1),
-              per_seed=per_seed)
+  return dict(learning_rate=lr, max_grad_norm=clip, gae_per_iteration=gae_per_iteration, cost_critic=cost_critic,
+              seconds=round(seconds, 1), per_seed=per_seed)
 
 
 def _summary(r: dict) -> dict:
@@ -136,7 +140,7 @@ def render_md(res: dict) -> str:
       f"per run, {res['timesteps']:,} env steps each, damage penalty w = 2. The Playground preset with "
       f"{res['run']['num_envs']} envs, batches of {res['run']['batch_size']} sequences × {res['run']['unroll_length']} "
       f"steps, {res['run']['num_minibatches']} minibatches × {res['run']['num_updates_per_batch']} epochs; critic 5 × 256 "
-      "swish. Targets: *moving* = brax's, GAE recomputed in every minibatch step with the critic being trained; "
+      f"swish{', two heads (reward, cost: a cost critic)' if res.get('cost_critic') else ''}. Targets: *moving* = brax's, GAE recomputed in every minibatch step with the critic being trained; "
       "*per iteration* = `gae_per_iteration`, computed once before the epochs. Diverged: a logged value loss past "
       "the lines of `train.ppo.CriticDivergedWarning` (1e9, and 1e6 × the seed's lowest before); past 1e9: any "
       "logged value loss above 1e9, the first point included (which has no lowest before it). Final: the last "
@@ -169,12 +173,12 @@ def main(argv=None) -> int:
   for lr, clip in a.setting_list:
     for label, flag in SCHEMES.items():
       print(f"lr {lr:g}, clip {clip}, {label} targets, seeds {a.seeds} ...", flush=True)
-      runs.append(run(a.seed_list, lr, clip, flag, a.timesteps, a.evals, a.per_iteration))
+      runs.append(run(a.seed_list, lr, clip, flag, a.timesteps, a.evals, a.per_iteration, a.cost_critic))
       s = _summary(runs[-1])
       print(f"  diverged {s['diverged']}/{s['seeds']}, past 1e9 {s['past_floor']}, final safe {100 * s['safe_mean']:.1f} %, {runs[-1]['seconds']:.0f} s",
             flush=True)
   res = dict(task="pusher", seeds=a.seed_list, timesteps=a.timesteps, run={k: v for k, v in RUN.items() if k != "progress"},
-             runs=runs)
+             cost_critic=a.cost_critic, runs=runs)
   provenance.save_results(res, "critic_targets", argv, a.out, render_md)
   return 0
 
