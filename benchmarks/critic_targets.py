@@ -36,13 +36,15 @@ import provenance  # noqa: E402  (first: sets the path and mjx_damage's XLA flag
 
 import train  # noqa: E402
 from train.experiments.pusher import PusherEnv  # noqa: E402
+from train.config import PPOConfig  # noqa: E402
 from train.ppo import V_FLOOR  # noqa: E402
 from value_loss_scan import first_crossing  # noqa: E402  (sibling script: the warning's lines on logged points)
 
 # The Playground preset's networks and epochs; batches small enough for a CPU (1280 env steps per iteration,
 # 64 SGD steps of 16 sequences × 10 steps).
 RUN = dict(num_envs=64, unroll_length=10, num_minibatches=8, batch_size=16, num_updates_per_batch=8,
-           episode_length=100, policy_hidden_sizes=(32, 32), num_eval_envs=64, damage_weight=2.0, progress=False)
+           episode_length=100, policy_hidden_sizes=(32, 32), num_eval_envs=64, damage_weight=2.0)
+PER_ITERATION = PPOConfig(**RUN).steps_per_iteration  # env steps of one seed per iteration
 SCHEMES = {"moving": False, "per_iteration": True}  # label -> gae_per_iteration
 DEFAULT_SETTINGS = "0.01:none,0.01:1,0.001:none"
 
@@ -84,7 +86,7 @@ def parse(argv=None):
     a.setting_list = _settings(a.settings)
   except ValueError as e:
     p.error(str(e))
-  per_iter = RUN["num_envs"] * RUN["unroll_length"] * RUN["batch_size"] * RUN["num_minibatches"] // RUN["num_envs"]
+  per_iter = PER_ITERATION
   if a.timesteps < per_iter:
     p.error(f"--timesteps: at least one iteration, {per_iter} env steps, got {a.timesteps}")
   if not 1 <= a.evals <= a.timesteps // per_iter:
@@ -100,17 +102,17 @@ def run(seeds, lr: float, clip: float | None, gae_per_iteration: bool, timesteps
   t0 = time.perf_counter()
   res = train.train(PusherEnv(), seeds=tuple(seeds), learning_rate=lr, max_grad_norm=clip,
                     gae_per_iteration=gae_per_iteration, cost_critic=cost_critic, num_timesteps=timesteps,
-                    eval_every=every, **RUN)
+                    eval_every=every, progress=False, **RUN)
   seconds = time.perf_counter() - t0
   per_seed = []
   for s in seeds:
     rows = [r for r in res.history if r["seed"] == s]
     points = [(r["env_steps"], r["loss/v_loss"]) for r in rows]
-    crossing = first_crossing(points)
+    crossing, largest = first_crossing(points), max(v for _, v in points)
     per_seed.append(dict(
         seed=s, value_loss=[v for _, v in points], env_steps=[n for n, _ in points],
         diverged=None if crossing is None else dict(env_steps=crossing[0], value_loss=crossing[1], lowest_before=crossing[2]),
-        largest_value_loss=max(v for _, v in points), past_floor=max(v for _, v in points) > V_FLOOR,
+        largest_value_loss=largest, past_floor=largest > V_FLOOR,
         completion=rows[-1]["eval/completion"],
         safe_completion=rows[-1]["eval/safe_completion"]))
   return dict(learning_rate=lr, max_grad_norm=clip, gae_per_iteration=gae_per_iteration, cost_critic=cost_critic,
@@ -177,7 +179,7 @@ def main(argv=None) -> int:
       s = _summary(runs[-1])
       print(f"  diverged {s['diverged']}/{s['seeds']}, past 1e9 {s['past_floor']}, final safe {100 * s['safe_mean']:.1f} %, {runs[-1]['seconds']:.0f} s",
             flush=True)
-  res = dict(task="pusher", seeds=a.seed_list, timesteps=a.timesteps, run={k: v for k, v in RUN.items() if k != "progress"},
+  res = dict(task="pusher", seeds=a.seed_list, timesteps=a.timesteps, run=dict(RUN),
              cost_critic=a.cost_critic, runs=runs)
   provenance.save_results(res, "critic_targets", argv, a.out, render_md)
   return 0
