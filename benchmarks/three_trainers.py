@@ -248,7 +248,9 @@ def plan(args, slug: str) -> list[Step]:
 
 
 def update_status(step: Step) -> Step:
-  """``step.status``: done, partly done (a paper run to continue), waits (for another step's file) or to run.
+  """``step.status``: done, partly done (a paper run to continue), stopped … its folder gone (a paper run that
+  cannot continue: its tables are built, the step is not run again over it), waits (for another step's file) or
+  to run.
   A results file of other seeds than the step's is refused (``ValueError``): choose another ``--tag``."""
   step.status = "to run"  # asked again during a call: a step that waited may run now
   if os.path.exists(_at(step.results)):
@@ -269,9 +271,8 @@ def update_status(step: Step) -> Step:
       step.status = "done"
       return step
     if not _holds_run(step):  # started over, the run would replace the file of its earlier calls
-      raise ValueError(f"results: {step.results} is a run stopped at {rows[0].get('env_steps_per_seed')} env steps "
-                       f"per seed whose folder {step.work} is gone (or give the --work-dir it ran in); move the "
-                       "file away to start the step over")
+      step.status = f"stopped at {rows[0].get('env_steps_per_seed')} env steps per seed, its folder gone"
+      return step
   if step.work is not None and _holds_run(step):
     step.status = "partly done"
     if "--resume" not in step.argv:
@@ -453,6 +454,10 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
     if not args.plan and (not args.tables or any(os.path.exists(_at(s.results)) for s in steps)):
       check_tables(args, steps)  # before any step runs: the call would end by replacing the table
     for s in chosen if not (args.plan or args.tables) else []:
+      if s.status.startswith("stopped"):  # --plan and --tables show it; a call to run it must not replace it
+        raise ValueError(f"results: {s.results} is a run {s.status.replace(', its folder gone', '')} whose "
+                         f"folder {s.work} is gone (or give the --work-dir it ran in); move the file away to "
+                         "start the step over, or leave it out of --parts")
       if s.status in ("to run", "partly done"):
         check_step(s)
         checked.add(s.name)

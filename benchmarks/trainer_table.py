@@ -230,13 +230,21 @@ def ours_runs(doc: dict, source: str, action: str) -> list[dict]:
                        seed=p["seed"], device=doc["device"].split(" (")[0],
                        settings=_settings(_std(kw.get("init_log_std")) if trainer != PAPER else "", schedule,
                                           actor, _task_settings(r.get("task_kwargs"), r.get("eval_task_kwargs"))),
-                       env_steps=r["env_steps_per_seed"],
+                       env_steps=r["env_steps_per_seed"], planned=_planned(r, trainer),
                        scores=_scores(p.get("final_eval_by_action"), p["final_eval"], head, action),
                        command=r["command"], source=source, date=r.get("date"),
                        t80=p.get("time_to_80_safe_s"), t80_scored="time_to_80_safe_s" in p,
                        **_steps_to_safe([h for h in r.get("history") or [] if h.get("seed") == p["seed"]],
                                         ("eval/safe_completion", "eval/completion", "wall_time"))))
   return runs
+
+
+def _planned(row: dict, trainer: str) -> int | None:
+  """The env steps per seed a run of the paper's settings was to reach (the paper's updates, ``--paper-timesteps``)
+  where it stopped short of them (its calls ran out); ``None`` for time-budgeted runs, whose ``num_timesteps`` is
+  only a ceiling."""
+  n = (row.get("config") or {}).get("num_timesteps")
+  return n if trainer == PAPER and n and row["env_steps_per_seed"] < n else None
 
 
 def _steps_to_safe(points: list[dict], keys: tuple, timed: bool = True) -> dict:
@@ -283,6 +291,7 @@ def groups(runs: list[dict]) -> list[dict]:
     g["seeds"] = sorted({r["seed"] for r in rs})
     g["devices"] = sorted({r["device"] for r in rs})
     g["env_steps"] = (min(r["env_steps"] for r in rs), max(r["env_steps"] for r in rs)) if rs else None
+    g["short"] = sum(r.get("planned") is not None for r in rs)
     timed = [r for r in rs if r["t80_scored"]]
     t = [r["t80"] for r in timed if r["t80"] is not None]
     g["time_to_80_safe"] = dict(scored=len(timed), reached=len(t), mean=sum(t) / len(t) if t else None,
@@ -306,6 +315,16 @@ def _steps(lo_hi) -> str:
     return "—"
   lo, hi = lo_hi
   return f"{lo / 1e6:.1f} M" if lo == hi else f"{lo / 1e6:.1f}–{hi / 1e6:.1f} M"
+
+
+def _group_steps(g: dict) -> str:
+  short = g.get("short", 0)
+  return _steps(g["env_steps"]) + (f" ({short} of {len(g['runs'])} stopped short of the planned)" if short else "")
+
+
+def _run_steps(r: dict) -> str:
+  planned = r.get("planned")
+  return f"{r['env_steps'] / 1e6:.1f} M" + (f" of {planned / 1e6:.1f} M planned" if planned else "")
 
 
 def _t80(t: dict, runs: int) -> str:
@@ -373,7 +392,7 @@ def render_md(doc: dict) -> str:
     extra = f" ({g['unscored']} more not scored by {a})" if g["unscored"] else ""
     lines.append(f"| {g['trainer']} | {g['reward']} | {g['settings']} | {n}{extra} | "
                  f"{', '.join(map(str, g['seeds'])) or '—'} | {', '.join(g['devices']) or '—'} | "
-                 f"{_steps(g['env_steps'])} | {_pct(g['completion'])} | {_pct(g['safe_completion'])} | {g['meet_bar']} / {n} "
+                 f"{_group_steps(g)} | {_pct(g['completion'])} | {_pct(g['safe_completion'])} | {g['meet_bar']} / {n} "
                  f"| {_t80(g['time_to_80_safe'], n)} | {_s80(g['env_steps_to_80_safe'], n)} |")
   lines += ["", "Every run:", "",
             "| trainer | reward | settings | seed | device | env steps | completion | safe completion "
@@ -383,7 +402,7 @@ def render_md(doc: dict) -> str:
     for r in g["runs"]:
       s = r["scores"]
       lines.append(f"| {r['trainer']} | {r['reward']} | {r['settings']} | {r['seed']} | {r['device']} | "
-                   f"{r['env_steps'] / 1e6:.1f} M | {100 * s['completion']:.1f} % | {100 * s['safe_completion']:.1f} % | "
+                   f"{_run_steps(r)} | {100 * s['completion']:.1f} % | {100 * s['safe_completion']:.1f} % | "
                    f"{_run_t80(r)} | {_run_s80(r)} | {_run_rate(r)} | {r['source']} | `{r['command']}` |")
   return "\n".join(lines) + "\n"
 

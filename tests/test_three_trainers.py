@@ -186,12 +186,27 @@ def test_brax_w2_runs_in_the_call_that_made_the_w0_policy_it_waits_for(tmp_path,
 
 
 def test_a_paper_run_whose_folder_is_gone_is_not_started_over(tmp_path, capsys):
+  """A stopped paper run whose work folder went with its machine: no call runs its step over the results of its
+  earlier calls, while --plan shows it and --tables builds the tables with it (its env steps as it stopped)."""
   argv = ["--trainers", "paper", "--seeds", "0,1,2"] + _dirs(tmp_path)
   assert _run(argv + ["--parts", "paper_task_only"], _stand_in([])) == 0
   shutil.rmtree(tmp_path / "w")
-  assert _run(argv) == 2
-  err = capsys.readouterr().err
-  assert "whose folder" in err and "move the file away" in err
+  before = open(tmp_path / "r" / "rl_place_plate_gpu_x_three_trainers_paper_task_only.json").read()
+  for parts in ([], ["--parts", "paper_task_only"]):
+    assert _run(argv + parts) == 2
+    err = capsys.readouterr().err
+    assert "paper_task_only.json is a run stopped at" in err and "whose folder" in err and "move the file away" in err
+  assert _run(argv + ["--plan"]) == 0
+  assert "paper_task_only: stopped at" in capsys.readouterr().out
+  os.remove(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md")
+  assert _run(argv + ["--tables"]) == 0
+  assert "steps left: paper_task_only, paper_penalty" in capsys.readouterr().out
+  md = open(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md").read()
+  assert "rl_place_plate_gpu_x_three_trainers_paper_task_only.json" in md
+  # a call that leaves the stopped step out runs the rest
+  log = []
+  assert _run(argv + ["--parts", "paper_penalty"], _stand_in(log)) == 0 and len(log) == 1
+  assert open(tmp_path / "r" / "rl_place_plate_gpu_x_three_trainers_paper_task_only.json").read() == before
 
 
 def test_stop_after_counts_each_trainers_overhead(tmp_path, capsys):

@@ -300,3 +300,19 @@ def test_a_run_with_targets_once_per_iteration_is_its_own_group(tmp_path):
   with open(out + ".json") as f:
     groups = json.load(f)["groups"]
   assert sorted("GAE once per iteration" in g["settings"] for g in groups) == [False, True]
+
+
+def test_a_paper_run_stopped_short_of_its_planned_steps_says_so(tmp_path):
+  """A run of the paper's settings is planned to the paper's updates (config num_timesteps) and may stop short
+  when its calls run out; the table says how far it got of the plan. A time-budgeted run's num_timesteps is only
+  a ceiling and is not shown."""
+  short = _ours_row("paper", "paper", 2.0, [(s, (0.03, 0.0), (0.03, 0.0)) for s in (0, 1)])
+  whole = _ours_row("paper_task_only", "paper", 0.0, [(0, (0.2, 0.0), (0.2, 0.0))])
+  timed = _ours_row("penalty", "playground", 2.0, [(0, (1.0, 0.9), (1.0, 0.9))])
+  short.update(env_steps_per_seed=25_034_752, config={"num_timesteps": 25_559_040}, stopped_by_time_limit=True)
+  whole.update(env_steps_per_seed=25_559_040, config={"num_timesteps": 25_559_040})
+  timed.update(env_steps_per_seed=18_022_400, config={"num_timesteps": 1_000_000_000}, stopped_by_time_limit=True)
+  g, md = _h200_table(tmp_path, [short, whole, timed], [])
+  assert "| 25.0 M (2 of 2 stopped short of the planned) |" in md
+  assert md.count("| 25.0 M of 25.6 M planned |") == 2
+  assert "| 25.6 M |" in md and "| 18.0 M |" in md and "1000" not in md
