@@ -220,6 +220,19 @@ def test_stop_after_counts_each_trainers_overhead(tmp_path, capsys):
   assert "== brax_w0_s0: exit status 1 after 0 s (budget 400 s)" in out
 
 
+def test_stop_after_counts_less_for_a_paper_run_continued(tmp_path, capsys):
+  """The paper's first call needs its 470 s budget + 90 s; the calls that continue it + 60 s."""
+  argv = ["--trainers", "paper", "--seeds", "0,1,2", "--parts", "paper_penalty"] + _dirs(tmp_path)
+  log = []
+  assert _run(argv + ["--stop-after", "540"], _stand_in(log)) == 0
+  assert log == [] and "paper_penalty: not started, it needs about 560 s" in capsys.readouterr().out
+  assert _run(argv, _stand_in(log)) == 0 and len(log) == 1  # stopped short: its work folder holds the run
+  assert _run(argv + ["--stop-after", "540"], _stand_in(log)) == 0
+  assert len(log) == 2 and "--resume" in log[1]
+  assert _run(argv + ["--stop-after", "520"], _stand_in(log)) == 0
+  assert len(log) == 2 and "paper_penalty: not started, it needs about 530 s" in capsys.readouterr().out
+
+
 def test_tables_of_a_benchmark_run_on_another_device(tmp_path, capsys):
   """--device names the results of a benchmark run elsewhere (a GPU): --plan shows their status and --tables
   rebuilds the tables from them here, running nothing."""
