@@ -1,15 +1,11 @@
 """benchmarks/critic_targets.py: moving vs fixed value targets under a stress learning rate (plumbing on CPU)."""
 
-import importlib.util
 import json
-import os
 
 import pytest
+from conftest import load_benchmark
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-_spec = importlib.util.spec_from_file_location("critic_targets", os.path.join(ROOT, "benchmarks", "critic_targets.py"))
-CT = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(CT)
+CT = load_benchmark("critic_targets")
 
 
 @pytest.mark.parametrize("argv, says", [
