@@ -510,9 +510,13 @@ def main(argv=None, *, child_env: dict | None = None, slug: str | None = None, r
   except ValueError as e:
     print(f"three_trainers.py: error: {e}; the steps' results are kept", file=sys.stderr)
     return 2
-  left = [s.name for s in (update_status(s) for s in steps) if s.status != "done"]
+  now = [update_status(s) for s in steps]
+  left = [s.name for s in now if s.status != "done" and not s.status.startswith("stopped")]
+  # a stopped step is tabled as it stopped and no call runs it again: not left for the next call
+  stopped = [s.name for s in now if s.status.startswith("stopped")]
   print(f"tables: {', '.join(x + '.md' for x in stems) or 'none yet (no step done)'}; "
-        f"steps left: {', '.join(left) or 'none'}")
+        f"steps left: {', '.join(left) or 'none'}"
+        + (f"; stopped short, their folders gone (tabled as they stopped): {', '.join(stopped)}" if stopped else ""))
   return 1 if failed else 0
 
 

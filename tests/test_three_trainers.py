@@ -200,7 +200,8 @@ def test_a_paper_run_whose_folder_is_gone_is_not_started_over(tmp_path, capsys):
   assert "paper_task_only: stopped at" in capsys.readouterr().out
   os.remove(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md")
   assert _run(argv + ["--tables"]) == 0
-  assert "steps left: paper_task_only, paper_penalty" in capsys.readouterr().out
+  assert ("steps left: paper_penalty; stopped short, their folders gone (tabled as they stopped): paper_task_only"
+          in capsys.readouterr().out)
   md = open(tmp_path / "r" / "trainer_table_place_plate_three_trainers_mode.md").read()
   assert "rl_place_plate_gpu_x_three_trainers_paper_task_only.json" in md
   # a call that leaves the stopped step out runs the rest
