@@ -47,7 +47,8 @@ for the 195 updates; two such processes sharing one GPU ran 22 k each, so give e
 Task reward alone and w = 2 each ran the whole 195 updates in three such calls on one warm H200 (66, 73
 and 56 updates with task reward alone, 67, 72 and 56 with w = 2; a work folder under the ignored runs/ is
 what such a machine keeps between calls; a machine released between calls comes back without it, and --resume
-then refuses, before anything compiles)::
+then refuses, before anything compiles, unless the folder is brought along: its checkpoint holds the whole
+training state, env states and RNG included, and names no path, so a copy continues anywhere)::
 
     P="--work-dir runs/rl_paper --paper-timesteps 25559040 --eval-actions sample,mode --seeds 0,1,2 --budget-seconds 490"
     python benchmarks/rl_multiseed.py --methods paper_task_only $P --tag paper_task_only --results-dir $OUT

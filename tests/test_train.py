@@ -9,6 +9,7 @@ import json
 import sys
 import types
 import os
+import shutil
 import warnings
 
 import jax
@@ -179,6 +180,11 @@ def test_resume_of_a_multi_seed_run_equals_uninterrupted(smoke, env, tmp_path):
   assert first.iterations == 4
   with open(os.path.join(out, "metrics.jsonl"), "a") as f:  # a row logged after the checkpoint is dropped
     f.write(json.dumps({"seed": 3, "iteration": 6, "env_steps": 6 * ITER}) + "\n")
+  # continued from a copy of the folder elsewhere, as on another machine: nothing in it names where it ran
+  moved = str(tmp_path / "elsewhere" / "resumed")
+  shutil.copytree(out, moved)
+  shutil.rmtree(out)
+  out = kw["out_dir"] = moved
   second = train.train(env, num_timesteps=SMOKE_STEPS, resume=True, **kw)
   assert second.iterations == 8
   _assert_trees_close(smoke.train_state.params, second.train_state.params)
