@@ -26,10 +26,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import provenance  # noqa: E402
 import trainer_table as tt  # noqa: E402  (sibling script: the same sources, runs and groups)
 from rl_multiseed import time_to_safe  # noqa: E402
 
@@ -128,9 +128,8 @@ def render_md(doc: dict) -> str:
 
 def main(argv=None) -> int:
   a = parse(argv)
-  command = "python benchmarks/learning_phases.py " + " ".join(
-      shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
-  doc = dict(task=a.task, command=command, sources=[s for s, _, _ in a.docs], groups=build(a.docs))
+  doc = dict(task=a.task, command=provenance.command("learning_phases", argv), sources=[s for s, _, _ in a.docs],
+             groups=build(a.docs))
   io.write_json(a.out + ".json", doc)
   io.write_text(a.out + ".md", render_md(doc))
   print(f"wrote {a.out}.md / .json ({len(doc['groups'])} groups)")

@@ -60,7 +60,7 @@ def test_each_run_splits_into_finding_the_task_and_doing_it_safely(tmp_path):
   assert g_brax["between"]["mean"] == 0
   md = open(out + ".md").read()
   assert "| 2 (2) | 1.0 M | 2.0 (2.0–2.0) M, 1 / 2 | 3.0 (3.0–3.0) M, 1 / 2 | 1.0 (1.0–1.0) M, 1 / 1 |" in md
-  assert "python benchmarks/learning_phases.py --task place_plate" in md
+  assert "benchmarks/learning_phases.py --task place_plate --sources" in md
 
 
 def test_a_file_that_is_not_a_results_file_is_refused_naming_it(tmp_path, capsys):
