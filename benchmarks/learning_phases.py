@@ -29,11 +29,10 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import provenance  # noqa: E402
+import provenance  # noqa: E402  (puts the repo root on sys.path)
 import trainer_table as tt  # noqa: E402  (sibling script: the same sources, runs and groups)
 from rl_multiseed import time_to_safe  # noqa: E402
-
-io = tt.io
+from mjx_damage import io  # noqa: E402
 
 
 def parse(argv=None):
@@ -55,7 +54,7 @@ def _points(kind: str, doc: dict) -> list[list[dict]]:
   for r in doc["rows"]:
     if kind == "brax":
       curve = r.get("scored_curve") or {}
-      pts = curve.get("points") or [] if curve.get("action") == "mode" else []
+      pts = (curve.get("points") or []) if curve.get("action") == "mode" else []
       out.append([dict(env_steps=q["env_steps"], completion=q.get("completion"), safe=q.get("safe_completion"))
                   for q in pts])
     else:
